@@ -1,0 +1,35 @@
+"""ament_python build for manip_kin (colcon, ``pip install``)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "manip_kin"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/robots", glob("config/robots/*")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="manip_kin developers",
+    maintainer_email="dev@manip-kin.invalid",
+    description="Kinematic control of serial manipulators for ROS 2 Jazzy.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "manip_kin = manip_kin.cli:main",
+            "robot_state = manip_kin.nodes.robot_state:main",
+            "cartesian_controller = manip_kin.nodes.cartesian_controller:main",
+            "trajectory_generator = manip_kin.nodes.trajectory_generator:main",
+            "recorder = manip_kin.nodes.recorder:main",
+        ],
+    },
+)
