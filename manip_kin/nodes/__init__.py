@@ -1,0 +1,1 @@
+"""ROS 2 nodes: thin adapters between ROS topics and the numpy core."""

@@ -1,0 +1,78 @@
+"""Shared ``main()`` plumbing for manip_kin nodes.
+
+Every node executable starts the same way: ``--help`` answered without
+starting ROS, rclpy initialised with the process arguments (so ``--ros-args``
+remapping and parameters work), SIGINT and SIGTERM ending the spin loop so the
+node can finish its work (a recorder closes its file), then a clean shutdown.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+
+from rclpy.node import Node
+
+
+def wants_help(argv: Sequence[str], usage: str) -> bool:
+    """Print ``usage`` and return True when the user asked for ``--help``.
+
+    Only arguments before ``--ros-args`` count, as in ``ros2 run``.
+    """
+    user_args = list(argv[1:])
+    if "--ros-args" in user_args:
+        user_args = user_args[: user_args.index("--ros-args")]
+    if "-h" in user_args or "--help" in user_args:
+        print(usage)
+        return True
+    return False
+
+
+def run_node(
+    make_node: Callable[[], Node],
+    usage: str,
+    argv: Sequence[str] | None = None,
+    on_shutdown: Callable[[Node], None] | None = None,
+) -> int:
+    """Create a node, spin it until Ctrl-C or SIGTERM, then clean up.
+
+    Args:
+        make_node: builds the node after ``rclpy.init``.
+        usage: text printed for ``--help``.
+        argv: process arguments; defaults to ``sys.argv``.
+        on_shutdown: called with the node before it is destroyed, also after
+            a signal (used to finish files).
+
+    Returns:
+        The process exit code: 0 after a clean stop, 2 when the node could not
+        be configured (bad parameter), with the reason logged on one line.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    argv = list(sys.argv if argv is None else argv)
+    if wants_help(argv, usage):
+        return 0
+    # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin().
+    rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
+    node = None
+    exit_code = 0
+    try:
+        try:
+            node = make_node()
+        except ValueError as error:  # includes manip_kin errors: bad robot, bad parameter
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            executor.spin()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+    finally:
+        if node is not None:
+            if on_shutdown is not None:
+                on_shutdown(node)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return exit_code
