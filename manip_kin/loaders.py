@@ -58,6 +58,10 @@ from manip_kin.rotations import (
 )
 
 DESCRIPTION_KEYS = ("joints", "dh", "poe", "urdf")
+TOP_LEVEL_KEYS = frozenset(
+    DESCRIPTION_KEYS
+    + ("name", "description", "units", "scale", "base_frame", "tool", "ee_offset", "initial_positions")
+)
 _PI_EXPRESSION = re.compile(
     r"^\s*(?P<sign>[+-])?\s*(?P<coef>\d+(\.\d*)?|\.\d+)?\s*\*?\s*pi\s*(/\s*(?P<den>\d+(\.\d*)?))?\s*$"
 )
@@ -302,6 +306,9 @@ def model_from_dict(description: Any, source: str, base_dir: Path | None = None)
     """
     reader = _Reader(source)
     data = reader.mapping(description, "<top level>")
+    unknown = sorted(set(map(str, data)) - TOP_LEVEL_KEYS)
+    if unknown:
+        raise reader.fail(unknown[0], f"unknown key; valid: {', '.join(sorted(TOP_LEVEL_KEYS))}")
     present = [key for key in DESCRIPTION_KEYS if key in data]
     if len(present) != 1:
         raise reader.fail(
