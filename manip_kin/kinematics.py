@@ -27,6 +27,7 @@ from manip_kin.model import RobotModel
 from manip_kin.rotations import matrix_to_rpy, rpy_rate_matrix
 
 JACOBIAN_KINDS = ("geometric", "space", "body", "analytical")
+_BATCH_BLOCK = 4096  # configurations per block in batch_frame_pose: 16 x 32 KiB temporaries
 
 
 class KinematicsData:
@@ -180,6 +181,53 @@ def jacobian_from_data(model: RobotModel, data: KinematicsData, frame_index: int
     return Jacobian(kind=kind, frame=model.frame_name(frame_index), angular=angular, linear=linear)
 
 
+# --- the fast path: unrolled code per frame (see chain_codegen) ---------------------------------
+
+
+def _frame_tail(model: RobotModel, frame_index: int) -> tuple[np.ndarray, int]:
+    """Constant transform from the last moving joint frame to ``frame_index``, and that joint count."""
+    chain = model.chain
+    n = model.dof
+    if frame_index == 0:
+        return np.eye(4), 0
+    if frame_index <= n:
+        return chain.frame_offsets[frame_index - 1], frame_index
+    tail = chain.moving_to_ee
+    if frame_index == n + 2:
+        tail = tail @ model.tool
+    return tail, n
+
+
+def compiled_kinematics(model: RobotModel, frame_index: int, with_jacobian: bool):
+    """The unrolled ``chain(q) -> tuple`` for one frame, built once per model."""
+    key = (frame_index, with_jacobian)
+    function = model.compiled.get(key)
+    if function is None:
+        from manip_kin.chain_codegen import compile_chain
+
+        tail, count = _frame_tail(model, frame_index)
+        revolute = [bool(flag) for flag in model.chain.revolute_mask]
+        function = compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian)
+        model.compiled[key] = function
+    return function
+
+
+def pose_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> np.ndarray:
+    """Pose of one frame in base, shape (4, 4): the fast path for control loops.
+
+    Args:
+        q: joint positions, a float array of shape (n,), not re-validated here.
+        frame_index: see :meth:`RobotModel.frame_index`.
+    """
+    return np.array(compiled_kinematics(model, frame_index, False)(q.tolist())).reshape(4, 4)
+
+
+def pose_and_jacobian_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pose (4, 4) and geometric Jacobian ``[angular; linear]`` (6, n) of a frame: the fast path."""
+    values = np.array(compiled_kinematics(model, frame_index, True)(q.tolist()))
+    return values[:16].reshape(4, 4), values[16:].reshape(6, model.dof)
+
+
 # --- one-off convenience wrappers ---------------------------------------------------------------
 
 
@@ -192,7 +240,7 @@ def _filled(model: RobotModel, q) -> KinematicsData:
 def frame_pose(model: RobotModel, q, frame: str | int | None = None) -> np.ndarray:
     """Pose of ``frame`` (default: tool if any, else ee) in base at ``q``, shape (4, 4)."""
     index = model.frame_index(model.default_frame if frame is None else frame)
-    return frame_in_base(model, _filled(model, q), index)
+    return pose_in_base(model, model.check_q(q), index)
 
 
 def frame_poses(model: RobotModel, q) -> np.ndarray:
@@ -227,6 +275,9 @@ def frame_twist(model: RobotModel, q, qdot, frame: str | int | None = None) -> t
 def batch_frame_pose(model: RobotModel, configurations, frame: str | int | None = None) -> np.ndarray:
     """Pose of one frame for many configurations at once.
 
+    Runs the unrolled chain on numpy arrays, a block of configurations at a time so the
+    temporaries stay in cache.
+
     Args:
         configurations: joint vectors, shape (N, n).
         frame: frame name or index (default: tool if any, else ee).
@@ -237,32 +288,23 @@ def batch_frame_pose(model: RobotModel, configurations, frame: str | int | None 
     if q.ndim != 2 or q.shape[1] != model.dof:
         raise InvalidArgumentError(f"configurations have shape {q.shape}; valid: (N, {model.dof})")
     index = model.frame_index(model.default_frame if frame is None else frame)
-    chain = model.chain
+    key = ("batch", index)
+    chain_function = model.compiled.get(key)
+    if chain_function is None:
+        from manip_kin.chain_codegen import compile_chain
+
+        tail, count = _frame_tail(model, index)
+        revolute = [bool(flag) for flag in model.chain.revolute_mask]
+        chain_function = compile_chain(model.chain.fixed, revolute, tail, count, False, vectorized=True)
+        model.compiled[key] = chain_function
     count = q.shape[0]
-    # Affine rows only (3, 4): the last row of every transform is [0, 0, 0, 1].
-    pose = np.broadcast_to(np.eye(4)[:3], (count, 3, 4)).copy()
-    last_joint = _moving_joint_count(model, index)
-    for i in range(last_joint):
-        # pose · F_i as one (3N, 4) @ (4, 4) product, then the joint motion on the columns.
-        pose = (pose.reshape(-1, 4) @ chain.fixed[i]).reshape(count, 3, 4)
-        qi = q[:, i : i + 1]
-        if chain.revolute_mask[i]:
-            c, s = np.cos(qi), np.sin(qi)
-            col0 = pose[:, :, 0].copy()
-            pose[:, :, 0] = c * col0 + s * pose[:, :, 1]
-            pose[:, :, 1] = c * pose[:, :, 1] - s * col0
-        else:
-            pose[:, :, 3] += qi * pose[:, :, 2]
-    if index == 0:
-        tail = np.eye(4)
-    elif index <= model.dof:
-        tail = chain.frame_offsets[index - 1]
-    else:
-        tail = chain.moving_to_ee
-        if index == model.dof + 2:
-            tail = tail @ model.tool
-    pose = (pose.reshape(-1, 4) @ tail).reshape(count, 3, 4)
-    out = np.zeros((count, 4, 4))
-    out[:, :3] = pose
-    out[:, 3, 3] = 1.0
-    return out
+    joint_rows = np.ascontiguousarray(q.T)  # one contiguous row of N values per joint
+    out = np.empty((count, 16))
+    block = np.empty((16, _BATCH_BLOCK))
+    for start in range(0, count, _BATCH_BLOCK):
+        stop = min(start + _BATCH_BLOCK, count)
+        width = stop - start
+        for entry, value in enumerate(chain_function(list(joint_rows[:, start:stop]))):
+            block[entry, :width] = value
+        out[start:stop] = block[:, :width].T
+    return out.reshape(count, 4, 4)

@@ -170,6 +170,8 @@ class RobotModel:
     lower: np.ndarray = field(init=False, repr=False, compare=False)
     upper: np.ndarray = field(init=False, repr=False, compare=False)
     velocity_limits: np.ndarray = field(init=False, repr=False, compare=False)
+    # Unrolled kinematics per (frame index, with Jacobian), built on first use; see chain_codegen.
+    compiled: dict = field(init=False, repr=False, compare=False, default_factory=dict)
 
     def __post_init__(self):
         if not self.joints:

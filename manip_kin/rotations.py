@@ -62,19 +62,23 @@ def matrix_to_rpy(rotation) -> np.ndarray:
     """Roll, pitch, yaw [rad] of a rotation matrix, inverse of :func:`rpy_to_matrix`.
 
     Pitch is in [-π/2, π/2]. At gimbal lock (pitch = ±π/2) only roll ∓ yaw is
-    defined; yaw is then reported as 0 and the whole rotation goes into roll.
+    defined; yaw is then reported as 0 and the rest of the rotation goes into roll.
     """
     r = np.asarray(rotation, dtype=float)
     # sin(pitch) = -r20; cos(pitch) from the first column is accurate near ±π/2.
     cos_pitch = math.hypot(r[0, 0], r[1, 0])
     pitch = math.atan2(-r[2, 0], cos_pitch)
-    if cos_pitch > 1e-9:
-        roll = math.atan2(r[2, 1], r[2, 2])
-        yaw = math.atan2(r[1, 0], r[0, 0])
-    else:
-        yaw = 0.0
-        # With yaw = 0: r01 = sp*sr, r11 = cr  ->  roll from the second column.
-        roll = math.atan2(math.copysign(1.0, -r[2, 0]) * r[0, 1], r[1, 1])
+    yaw = math.atan2(r[1, 0], r[0, 0]) if cos_pitch > 1e-12 else 0.0
+    # Roll from what is left once yaw and pitch are undone: Rx(roll) = Ry(pitch)ᵀ Rz(yaw)ᵀ R.
+    # Exact at and near gimbal lock, where atan2(r21, r22) loses the digits.
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    # rows 1 and 2 of Ry(pitch)ᵀ Rz(yaw)ᵀ, applied to columns 1 and 2 of R
+    row1 = (-sy, cy, 0.0)
+    row2 = (sp * cy, sp * sy, cp)
+    m11 = row1[0] * r[0, 1] + row1[1] * r[1, 1]
+    m21 = row2[0] * r[0, 1] + row2[1] * r[1, 1] + row2[2] * r[2, 1]
+    roll = math.atan2(m21, m11)
     return np.array([roll, pitch, yaw])
 
 

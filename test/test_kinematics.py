@@ -205,7 +205,8 @@ def test_batched_fk_equals_single_fk(name):
     configurations = np.array([model.random_configuration(rng) for _ in range(50)])
     for frame in (model.default_frame, "ee", "1", "base"):
         batched = batch_frame_pose(model, configurations, frame)
-        single = np.array([frame_pose(model, q, frame) for q in configurations])
+        index = model.frame_index(frame)
+        single = np.array([frame_poses(model, q)[index] for q in configurations])  # the numpy chain
         np.testing.assert_allclose(batched, single, atol=1e-12)
 
 
@@ -284,3 +285,23 @@ def test_unknown_frame_lists_the_valid_ones():
     with pytest.raises(UnknownFrameError) as error:
         frame_pose(model, np.zeros(6), "tool")  # irb120 has no tool
     assert "valid frames: base, 1, 2, 3, 4, 5, 6, ee" in str(error.value)
+
+
+# --- the unrolled fast path against the numpy chain --------------------------------------------
+
+
+@pytest.mark.parametrize("name", ROBOTS + ["panda"])
+def test_unrolled_pose_and_jacobian_match_the_numpy_chain(name):
+    from manip_kin.kinematics import geometric_jacobian_from_data, pose_and_jacobian_in_base
+
+    model = _model(name)
+    data = KinematicsData(model)
+    rng = np.random.default_rng(9)
+    for _ in range(10):
+        q = model.random_configuration(rng)
+        forward_kinematics(model, data, q)
+        frames = all_frames(model, data)
+        for index in range(len(model.frame_names)):
+            pose, geometric = pose_and_jacobian_in_base(model, q, index)
+            np.testing.assert_allclose(pose, frames[index], atol=1e-12)
+            np.testing.assert_allclose(geometric, geometric_jacobian_from_data(model, data, index), atol=1e-12)
