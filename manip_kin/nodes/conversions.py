@@ -23,10 +23,12 @@ from __future__ import annotations
 
 import array
 import math
+import struct
 from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Pose, PoseStamped, Twist, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -151,8 +153,8 @@ def fill_twist_stamped(
     if msg.header.frame_id != frame_id:
         msg.header.frame_id = frame_id
     a, v = msg.twist.angular, msg.twist.linear
-    a.x, a.y, a.z = (float(value) for value in angular)
-    v.x, v.y, v.z = (float(value) for value in linear)
+    a.x, a.y, a.z = np.asarray(angular, dtype=float).tolist()
+    v.x, v.y, v.z = np.asarray(linear, dtype=float).tolist()
     return msg
 
 
@@ -330,3 +332,186 @@ def check_command(msg: Float64MultiArray, dof: int, what: str = "joint velocity 
     values = multiarray_to_array(msg)
     _raise_if(command_problem(values, dof, what))
     return values
+
+
+# --- diagnostics -----------------------------------------------------------------------------
+
+#: DiagnosticStatus levels by name (diagnostic_msgs/DiagnosticStatus constants).
+DIAGNOSTIC_LEVELS = {"ok": b"\x00", "warn": b"\x01", "error": b"\x02", "stale": b"\x03"}
+
+
+def make_diagnostic_status(name: str, level: str, message: str, hardware_id: str, values) -> DiagnosticStatus:
+    """A ``DiagnosticStatus`` with ``values`` given as ``(key, text)`` pairs.
+
+    Args:
+        name: status name, the node's name (``cartesian_controller``).
+        level: ``ok``, ``warn``, ``error`` or ``stale``.
+        message: short summary, here the state (``tracking``, ``converged``...).
+        hardware_id: the robot name.
+        values: iterable of ``(key, value)``; values are converted with ``str``.
+    """
+    status = DiagnosticStatus()
+    status.level = DIAGNOSTIC_LEVELS[level]
+    status.name = name
+    status.message = message
+    status.hardware_id = hardware_id
+    status.values = [KeyValue(key=str(key), value=str(value)) for key, value in values]
+    return status
+
+
+def make_diagnostic_array(stamp: Time, statuses) -> DiagnosticArray:
+    """A ``DiagnosticArray`` of ``statuses`` stamped ``stamp``."""
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    msg.status = list(statuses)
+    return msg
+
+
+def diagnostic_values(status: DiagnosticStatus) -> dict[str, str]:
+    """The key/value pairs of a ``DiagnosticStatus`` as a dict."""
+    return {kv.key: kv.value for kv in status.values}
+
+
+# --- pre-serialised messages for the 1 kHz loops ------------------------------------------------
+#
+# rclpy converts a Python message to C field by field (~10 µs for a PoseStamped) before
+# serialising it; publishing bytes that are already CDR skips both and halves the cost of a
+# publish. These encoders write the little-endian CDR (XCDR1, what rmw_fastrtps and
+# rmw_cyclonedds exchange) of the few fixed-shape messages the loops publish, into one
+# precompiled ``struct.Struct`` each; the tests check every one against
+# ``rclpy.serialization.serialize_message``.
+
+_CDR_LE = b"\x00\x01\x00\x00"  # encapsulation: CDR, little endian
+
+
+class _CdrLayout:
+    """Builds a ``struct`` format with CDR alignment (relative to the payload start)."""
+
+    def __init__(self):
+        self.parts = ["<4s"]  # the encapsulation header, not part of the aligned payload
+        self.offset = 0
+
+    def align(self, size: int) -> None:
+        pad = (-self.offset) % size
+        if pad:
+            self.parts.append(f"{pad}x")
+            self.offset += pad
+
+    def add(self, code: str, size: int, count: int = 1) -> None:
+        self.align(size)
+        self.parts.append(f"{count}{code}" if count != 1 else code)
+        self.offset += size * count
+
+    def add_string(self, text: str) -> bytes:
+        data = text.encode() + b"\x00"
+        self.add("I", 4)
+        self.parts.append(f"{len(data)}s")
+        self.offset += len(data)
+        return data
+
+    def header(self, frame_id: str) -> bytes:
+        """``std_msgs/Header``: stamp (sec, nanosec), then frame_id; returns the frame bytes."""
+        self.add("i", 4)
+        self.add("I", 4)
+        return self.add_string(frame_id)
+
+    def compile(self) -> struct.Struct:
+        return struct.Struct("".join(self.parts))
+
+
+def _stamp_parts(stamp_ns: int) -> tuple[int, int]:
+    return divmod(int(stamp_ns), _NS_PER_S)
+
+
+class PoseStampedCdr:
+    """Serialised ``geometry_msgs/PoseStamped`` with a fixed frame id.
+
+    Args:
+        frame_id: the header's frame id.
+    """
+
+    def __init__(self, frame_id: str):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 7)
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, matrix: np.ndarray) -> bytes:
+        """CDR bytes of the pose ``matrix`` (4x4) stamped ``stamp_ns`` [ns since epoch]."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        qx, qy, qz, qw = matrix_to_quat(matrix[:3, :3]).tolist()
+        x, y, z = matrix[:3, 3].tolist()
+        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, x, y, z, qx, qy, qz, qw)
+
+
+class TwistStampedCdr:
+    """Serialised ``geometry_msgs/TwistStamped`` with a fixed frame id."""
+
+    def __init__(self, frame_id: str):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 6)
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, angular: np.ndarray, linear: np.ndarray) -> bytes:
+        """CDR bytes of ``linear`` [m/s] and ``angular`` [rad/s] velocity stamped ``stamp_ns``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *linear.tolist(), *angular.tolist()
+        )
+
+
+class JointStateCdr:
+    """Serialised ``sensor_msgs/JointState`` with fixed names, positions and velocities (no effort).
+
+    Args:
+        names: joint names, model order.
+        frame_id: the header's frame id (empty for joint states, as robot drivers send them).
+    """
+
+    def __init__(self, names: Sequence[str], frame_id: str = ""):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("I", 4)
+        self._names: list[object] = [len(names)]
+        for name in names:
+            data = layout.add_string(name)
+            self._names += [len(data), data]
+        count = len(names)
+        for _ in range(2):  # position, velocity
+            layout.add("I", 4)
+            if count:
+                layout.add("d", 8, count)
+        layout.add("I", 4)  # effort: empty
+        self._count = count
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> bytes:
+        """CDR bytes of ``position`` and ``velocity`` (shape (n,)) stamped ``stamp_ns``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        n = self._count
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names,
+            n, *position.tolist(), n, *velocity.tolist(), 0,
+        )
+
+
+class Float64ArrayCdr:
+    """Serialised ``std_msgs/Float64MultiArray`` of ``size`` values with an empty layout."""
+
+    def __init__(self, size: int):
+        layout = _CdrLayout()
+        layout.add("I", 4)  # layout.dim: empty sequence
+        layout.add("I", 4)  # layout.data_offset
+        layout.add("I", 4)  # data length
+        if size:
+            layout.add("d", 8, size)
+        self._size = size
+        self._struct = layout.compile()
+
+    def encode(self, values: np.ndarray) -> bytes:
+        """CDR bytes of ``values``, shape (size,)."""
+        return self._struct.pack(_CDR_LE, 0, 0, self._size, *values.tolist())

@@ -1,0 +1,257 @@
+"""``cartesian_controller``: goal pose (+ feed-forward twist) to joint-rate commands.
+
+The node holds one :class:`~manip_kin.control.CartesianController`; every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state, goal pose
+and goal twist, runs one control step and publishes ``/joint_velocity_commands``.
+``/diagnostics`` carries the state (see :data:`STATES`), the errors and the loop timing,
+at ``diagnostics_rate_hz`` and at once when the state changes.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
+from manip_kin.errors import ManipKinError
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.runner import run_node
+from manip_kin.robots import load_robot
+
+NODE_NAME = "cartesian_controller"
+
+#: Controller states reported as the DiagnosticStatus message and the ``state`` value.
+STATES = ("idle", "tracking", "converged", "singular", "joint-limited", "stale input")
+
+PARAMETERS = (
+    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file"),
+    ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
+    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0),
+    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0),
+    ParamSpec("frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"),
+    ParamSpec("task", "str", "", "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)"),
+    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0),
+    ParamSpec("singular_threshold", "float", 0.02, "smallest singular value below which damping rises", positive=True),
+    ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits"),
+    ParamSpec("respect_position_limits", "bool", True, "redistribute the task over joints not at a position limit"),
+    ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
+    ParamSpec("joint_state_timeout", "float", 0.1, "no joint state for longer than this: publish zeros", "s", positive=True),
+    ParamSpec("goal_timeout", "float", 0.0, "a goal older than this is dropped and zeros published (0 = goals never expire)", "s", minimum=0.0),
+    ParamSpec("goal_twist_timeout", "float", 0.05, "the feed-forward twist is used while younger than this", "s", positive=True),
+    ParamSpec("position_tolerance", "float", 1e-4, "converged when the position error is below this", "m", positive=True),
+    ParamSpec("orientation_tolerance", "float", 1e-3, "... and the orientation error below this", "rad", positive=True),
+    ParamSpec("quaternion_tolerance", "float", 1e-2, "a goal quaternion whose length differs from 1 by more is rejected", positive=True),
+    ParamSpec("diagnostics_rate_hz", "float", 10.0, "rate of /diagnostics (also sent at once on a state change)", "Hz", positive=True),
+    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+)
+
+USAGE = usage_text(
+    NODE_NAME,
+    "Resolved-rate cartesian controller: drives the controlled frame (tool if any, else end\n"
+    "effector) to the latest /goal_pose with joint-rate commands at rate_hz, adding the\n"
+    "/goal_twist feed-forward while it is fresh. A goal with a non-finite value, a quaternion far\n"
+    "from unit length or a frame other than the base frame is rejected (previous goal kept).\n"
+    "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
+    f"States on /diagnostics: {', '.join(STATES)}.",
+    PARAMETERS,
+    subscribes=[
+        ("/goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
+        ("/goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
+        ("/joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
+    ],
+    publishes=[
+        ("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
+        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, errors [m, rad], manipulability, damping, limits, loop timing"),
+    ],
+    example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000 -p gain_linear:=1.5",
+)
+
+
+class CartesianControllerNode(Node):
+    """ROS handles around one :class:`~manip_kin.control.CartesianController`."""
+
+    def __init__(self, **node_kwargs):
+        super().__init__(NODE_NAME, **node_kwargs)
+        params = declare_parameters(self, PARAMETERS)
+        self.model = load_robot(params["robot"])
+        config = ControllerConfig(
+            gain_angular=params["gain_angular"],
+            gain_linear=params["gain_linear"],
+            frame=params["frame"] or None,
+            task=params["task"] or None,
+            damping_max=params["damping_max"],
+            singular_threshold=params["singular_threshold"],
+            respect_velocity_limits=params["respect_velocity_limits"],
+            respect_position_limits=params["respect_position_limits"],
+        )
+        self.controller = CartesianController(self.model, config)
+        self.base_frame = params["base_frame"] or self.model.base_frame
+        self.rate_hz = params["rate_hz"]
+        self.dt = 1.0 / self.rate_hz
+        self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
+        self._goal_timeout_ns = int(params["goal_timeout"] * 1e9)
+        self._twist_timeout_ns = int(params["goal_twist_timeout"] * 1e9)
+        self.position_tolerance = params["position_tolerance"]
+        self.orientation_tolerance = params["orientation_tolerance"]
+        self._quaternion_tolerance = params["quaternion_tolerance"]
+        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+
+        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 10)
+        self._goal_sub = PolledSubscription(self, PoseStamped, "/goal_pose", 10)
+        self._twist_sub = PolledSubscription(self, TwistStamped, "/goal_twist", 10)
+        self._command_pub = self.create_publisher(Float64MultiArray, "/joint_velocity_commands", 10)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
+        self._zeros = np.zeros(self.model.dof)
+        self._mapper = conv.JointStateMapper(self.model.joint_names)
+
+        self.q: np.ndarray | None = None
+        self._q_time_ns = 0
+        self.goal: np.ndarray | None = None
+        self.goal_stamp = ""
+        self._goal_time_ns = 0
+        self._twist: tuple[np.ndarray, np.ndarray] | None = None
+        self._twist_moving = False
+        self._twist_time_ns = 0
+        self.state = "idle"
+        self.detail = "no goal yet"
+        self.output: ControlOutput | None = None
+        self.rejected_goals = 0
+        self.rejected_twists = 0
+        self.rejected_joint_states = 0
+        self._last_diagnostics_ns = 0
+        self._warn = ThrottledLog(self.get_logger().warning, 1.0)
+
+        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
+        self.get_logger().info(
+            f"robot {self.model.name}: controlling frame {self.model.frame_name(self.controller.frame_index)!r} "
+            f"at {self.rate_hz:g} Hz, gains {config.gain_angular:g}/{config.gain_linear:g} 1/s, "
+            f"goals in frame {self.base_frame!r}"
+        )
+        if self.loop.realtime_priority:
+            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
+        self.loop.start()
+
+    # --- inputs --------------------------------------------------------------------------------
+
+    def _take_inputs(self, now_ns: int) -> None:
+        while (msg := self._joint_state_sub.take()) is not None:
+            try:
+                self.q = self._mapper.positions(msg)
+                self._q_time_ns = now_ns
+            except conv.InvalidMessageError as error:
+                self.rejected_joint_states += 1
+                self._warn("joint_state", f"rejected /joint_states: {error}")
+        while (msg := self._goal_sub.take()) is not None:
+            problem = conv.pose_problem(msg, self.base_frame, "goal pose", self._quaternion_tolerance)
+            if problem is not None:
+                self.rejected_goals += 1
+                self._warn("goal", f"rejected /goal_pose: {problem}; keeping the previous goal")
+                continue
+            self.goal = conv.pose_stamped_to_matrix(msg)
+            self.goal_stamp = conv.stamp_key(msg.header.stamp)
+            self._goal_time_ns = now_ns
+        while (msg := self._twist_sub.take()) is not None:
+            problem = conv.twist_problem(msg, self.base_frame, "goal twist")
+            if problem is not None:
+                self.rejected_twists += 1
+                self._warn("twist", f"rejected /goal_twist: {problem}; feed-forward not used")
+                continue
+            angular, linear = conv.twist_to_arrays(msg.twist)
+            self._twist = (angular, linear)
+            self._twist_moving = bool(angular.any() or linear.any())
+            self._twist_time_ns = now_ns
+
+    # --- the cycle -------------------------------------------------------------------------------
+
+    def _cycle(self, now_ns: int) -> None:
+        self._take_inputs(now_ns)
+        qdot = self._zeros
+        previous_state = self.state
+        if self.q is None:
+            self.state, self.detail = "stale input", "no joint state yet"
+        elif now_ns - self._q_time_ns > self._joint_state_timeout_ns:
+            self.state, self.detail = "stale input", f"joint state {(now_ns - self._q_time_ns) * 1e-9:.2f} s old"
+        elif self.goal is None:
+            self.state, self.detail = "idle", "no goal yet"
+        elif self._goal_timeout_ns and now_ns - self._goal_time_ns > self._goal_timeout_ns:
+            self.state, self.detail = "stale input", f"goal {(now_ns - self._goal_time_ns) * 1e-9:.2f} s old"
+        else:
+            twist_fresh = self._twist is not None and now_ns - self._twist_time_ns <= self._twist_timeout_ns
+            try:
+                output = self.controller.step(self.q, self.goal, self._twist if twist_fresh else None, self.dt)
+            except ManipKinError as error:
+                self.state, self.detail = "stale input", f"control step failed: {error}"
+                self._warn("step", f"control step failed, publishing zeros: {error}")
+            else:
+                self.output = output
+                qdot = output.qdot
+                self.state, self.detail = self._classify(output, twist_fresh and self._twist_moving)
+        self._command_pub.publish(self._command_cdr.encode(qdot))
+        if self.state != previous_state or now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
+            self._last_diagnostics_ns = now_ns
+            self._publish_diagnostics(now_ns)
+
+    def _classify(self, output: ControlOutput, goal_moving: bool) -> tuple[str, str]:
+        position_error = output.position_error_norm
+        orientation_error = output.orientation_error_norm
+        if not goal_moving and position_error <= self.position_tolerance and orientation_error <= self.orientation_tolerance:
+            return "converged", "goal reached within tolerance"
+        if output.singular:
+            return "singular", f"manipulability {output.manipulability:.3g}, damping {output.damping:.3g}"
+        if output.limited_joints:
+            names = [self.model.joint_names[i] for i in output.limited_joints]
+            return "joint-limited", f"joints at a position limit: {', '.join(names)}"
+        return "tracking", "moving towards the goal"
+
+    def _publish_diagnostics(self, now_ns: int) -> None:
+        output = self.output
+        active = self.state not in ("idle", "stale input") and output is not None
+        values = [
+            ("state", self.state),
+            ("detail", self.detail),
+            ("goal_stamp", self.goal_stamp),
+            ("goal_xyz", " ".join(f"{v:.6f}" for v in self.goal[:3, 3]) if self.goal is not None else ""),
+            ("position_error", f"{output.position_error_norm:.9f}" if active else ""),
+            ("orientation_error", f"{output.orientation_error_norm:.9f}" if active else ""),
+            ("manipulability", f"{output.manipulability:.6g}" if active else ""),
+            ("damping", f"{output.damping:.6g}" if active else ""),
+            ("velocity_scale", f"{output.velocity_scale:.4f}" if active else ""),
+            ("limited_joints", ",".join(self.model.joint_names[i] for i in output.limited_joints) if active else ""),
+            ("position_tolerance", f"{self.position_tolerance:g}"),
+            ("orientation_tolerance", f"{self.orientation_tolerance:g}"),
+            ("rejected_goals", str(self.rejected_goals)),
+            ("rejected_twists", str(self.rejected_twists)),
+            ("rejected_joint_states", str(self.rejected_joint_states)),
+        ] + stats_key_values(self.loop.stats())
+        level = {"stale input": "warn", "singular": "warn", "joint-limited": "ok"}.get(self.state, "ok")
+        status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
+        self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+
+    def _on_loop_error(self, error: BaseException) -> None:
+        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
+            self.loop.stop(timeout=0.0)
+            return
+        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
+
+    def stop(self) -> None:
+        """Stop the loop thread (before the node is destroyed)."""
+        self.loop.stop()
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``cartesian_controller`` executable."""
+    return run_node(CartesianControllerNode, USAGE, argv, on_shutdown=lambda node: node.stop())
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

@@ -1,0 +1,197 @@
+"""Node parameters: one table per node gives the declaration, the checks and the ``--help`` text.
+
+Parameters are declared with a :class:`~rcl_interfaces.msg.ParameterDescriptor`
+(description with units, read-only: nodes read them once at start) and
+``dynamic_typing`` so that ``-p rate_hz:=1000`` (an integer on the command line) and
+``-p initial_positions:=[0, 0, 0]`` work where a float is meant; the value is then
+coerced and checked here, and a bad one stops the node with a one-line error (exit 2
+through ``run_node``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from manip_kin.errors import InvalidArgumentError
+
+KINDS = ("float", "int", "bool", "str", "float_list")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter.
+
+    Attributes:
+        name: parameter name.
+        kind: ``float``, ``int``, ``bool``, ``str`` or ``float_list``.
+        default: default value (None: no default, e.g. "the robot's start configuration").
+        description: what it does, one sentence.
+        unit: unit text such as ``Hz``, ``s``, ``1/s``, ``m`` ("" when none).
+        minimum: smallest valid value for numbers (inclusive), or None.
+        positive: True when the value must be > 0.
+        choices: valid values for strings, or empty.
+        default_text: how to show a None default in ``--help``.
+    """
+
+    name: str
+    kind: str
+    default: object
+    description: str
+    unit: str = ""
+    minimum: float | None = None
+    positive: bool = False
+    choices: tuple[str, ...] = ()
+    default_text: str = ""
+
+    def descriptor(self) -> ParameterDescriptor:
+        """The descriptor: description with unit, valid range, read-only, dynamic typing."""
+        text = self.description + (f" [{self.unit}]" if self.unit else "")
+        if self.choices:
+            text += f" (one of: {', '.join(self.choices)})"
+        return ParameterDescriptor(
+            name=self.name,
+            description=text,
+            additional_constraints=self.constraint_text(),
+            read_only=True,
+            dynamic_typing=True,
+        )
+
+    def constraint_text(self) -> str:
+        """Valid values in words."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        if self.positive:
+            return "> 0"
+        if self.minimum is not None:
+            return f">= {self.minimum:g}"
+        return ""
+
+    def help_line(self) -> str:
+        """One line for ``--help``: name, default, unit, description."""
+        if self.default is None:
+            default = self.default_text or "(none)"
+        elif isinstance(self.default, str):
+            default = repr(self.default)
+        elif isinstance(self.default, bool):
+            default = "true" if self.default else "false"
+        else:
+            default = str(self.default)
+        unit = f" [{self.unit}]" if self.unit else ""
+        choices = f" One of: {', '.join(self.choices)}." if self.choices else ""
+        return f"  {self.name} (default {default}){unit}: {self.description}.{choices}"
+
+    def coerce(self, value):
+        """``value`` converted to this parameter's kind and checked; InvalidArgumentError otherwise."""
+        if value is None:
+            return None
+        try:
+            if self.kind == "float":
+                if isinstance(value, bool):
+                    raise TypeError
+                result = float(value)
+                self._check_number(result)
+                return result
+            if self.kind == "int":
+                if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+                    raise TypeError
+                result = int(value)
+                self._check_number(result)
+                return result
+            if self.kind == "bool":
+                if not isinstance(value, bool):
+                    raise TypeError
+                return value
+            if self.kind == "str":
+                if not isinstance(value, str):
+                    raise TypeError
+                if self.choices and value not in self.choices:
+                    raise InvalidArgumentError(
+                        f"parameter {self.name} = {value!r}; valid: {', '.join(self.choices)}"
+                    )
+                return value
+            if self.kind == "float_list":
+                if isinstance(value, (str, bytes)) or any(isinstance(v, bool) for v in value):
+                    raise TypeError
+                result = [float(v) for v in value]
+                if not all(math.isfinite(v) for v in result):
+                    raise InvalidArgumentError(f"parameter {self.name} contains NaN or infinity; valid: finite numbers")
+                return result
+        except (TypeError, ValueError) as error:
+            if isinstance(error, InvalidArgumentError):
+                raise
+            raise InvalidArgumentError(
+                f"parameter {self.name} = {value!r} has the wrong type; valid: {self._kind_text()}"
+            ) from None
+        raise InvalidArgumentError(f"parameter {self.name}: unknown kind {self.kind!r}")
+
+    def _check_number(self, value: float) -> None:
+        if not math.isfinite(value):
+            raise InvalidArgumentError(f"parameter {self.name} = {value}; valid: a finite number")
+        if self.positive and not value > 0:
+            raise InvalidArgumentError(f"parameter {self.name} = {value:g}; valid: > 0 {self.unit}".rstrip())
+        if self.minimum is not None and value < self.minimum:
+            raise InvalidArgumentError(f"parameter {self.name} = {value:g}; valid: >= {self.minimum:g} {self.unit}".rstrip())
+
+    def _kind_text(self) -> str:
+        return {
+            "float": "a number",
+            "int": "an integer",
+            "bool": "true or false",
+            "str": "a string",
+            "float_list": "a list of numbers such as [0.0, 1.5]",
+        }[self.kind]
+
+
+def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, object]:
+    """Declare every parameter on ``node`` and return the checked values by name.
+
+    Raises:
+        InvalidArgumentError: a value of the wrong type or outside its range.
+    """
+    values: dict[str, object] = {}
+    for spec in specs:
+        if spec.default is None:
+            # No default: declared without a value; "not set" reads back as None.
+            parameter = node.declare_parameter(spec.name, None, spec.descriptor())
+        else:
+            parameter = node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        value = parameter.value
+        if parameter.type_ == Parameter.Type.NOT_SET:
+            value = None
+        values[spec.name] = spec.coerce(value)
+    return values
+
+
+def usage_text(
+    executable: str,
+    summary: str,
+    specs: Sequence[ParamSpec],
+    subscribes: Sequence[tuple[str, str, str]],
+    publishes: Sequence[tuple[str, str, str]],
+    example: str,
+) -> str:
+    """The ``--help`` text of a node executable.
+
+    Args:
+        executable: executable name.
+        summary: what the node does (a few lines).
+        specs: its parameters.
+        subscribes: ``(topic, type, note)`` per input topic.
+        publishes: ``(topic, type, note)`` per output topic.
+        example: example command line(s).
+    """
+    lines = [f"usage: {executable} [--help] [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r FROM:=TO ...]", ""]
+    lines += [summary.strip(), "", "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters):"]
+    lines += [spec.help_line() for spec in specs]
+    lines += ["", "Subscribes:"]
+    lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in subscribes]
+    lines += ["", "Publishes:"]
+    lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in publishes]
+    lines += ["", "Example:", f"  {example}"]
+    return "\n".join(lines)

@@ -1,0 +1,275 @@
+"""``robot_state``: a simulated arm that integrates joint-rate commands and publishes its state.
+
+The node holds one :class:`JointIntegrator` (plain numpy) and, every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop`, takes the latest command, integrates it
+and publishes ``/joint_states``, ``/ee_pose``, ``/tool_pose``, ``/ee_twist`` and
+``/tool_twist``. ``/robot_description`` is published once, transient local.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+
+from manip_kin.errors import InvalidArgumentError, JointCountError
+from manip_kin.kinematics import pose_and_jacobian_in_base
+from manip_kin.model import RobotModel
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.runner import run_node
+from manip_kin.robots import bundled_robot_names, load_robot
+
+NODE_NAME = "robot_state"
+
+PARAMETERS = (
+    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file"),
+    ParamSpec(
+        "initial_positions",
+        "float_list",
+        None,
+        "joint positions at start, model joint order",
+        "rad | m",
+        default_text="the robot's scenario start, else zeros clipped into the limits",
+    ),
+    ParamSpec("rate_hz", "float", 500.0, "integration and publishing rate", "Hz", positive=True),
+    ParamSpec("command_timeout", "float", 0.1, "a command older than this counts as zero velocity", "s", positive=True),
+    ParamSpec("base_frame", "str", None, "frame id of the published poses and twists", default_text="the robot's base frame (base_link)"),
+    ParamSpec("diagnostics_rate_hz", "float", 2.0, "rate of the loop statistics on /diagnostics (0: off)", "Hz", minimum=0.0),
+    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+)
+
+USAGE = usage_text(
+    NODE_NAME,
+    "Simulated arm: integrates the latest joint velocity command at rate_hz within the joint\n"
+    "position and velocity limits (a command above a velocity limit is scaled down as a whole,\n"
+    "keeping its direction) and publishes the joint state, the end-effector and tool poses and\n"
+    "twists every cycle. A command older than command_timeout counts as zero; a command with the\n"
+    "wrong length or a non-finite value is rejected with a log line.",
+    PARAMETERS,
+    subscribes=[("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")],
+    publishes=[
+        ("/joint_states", "sensor_msgs/JointState", "name, position, velocity, stamped"),
+        ("/ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
+        ("/tool_pose", "geometry_msgs/PoseStamped", "tool (end effector if no tool) in the base frame"),
+        ("/ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
+        ("/tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
+        ("/robot_description", "std_msgs/String", "URDF of the model, once, transient local"),
+        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state"),
+    ],
+    example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000  (robots: {', '.join(bundled_robot_names())})",
+)
+
+
+class JointIntegrator:
+    """Joint positions integrated from velocity commands within the limits (plain numpy).
+
+    Args:
+        model: the robot.
+        q0: start positions, shape (n,), inside the limits.
+
+    Attributes:
+        q: current positions [rad | m], shape (n,).
+        qdot: velocity of the last step [rad/s | m/s], shape (n,): the commanded rate after
+            limiting, zero for a joint stopped at a position limit.
+        ee: end-effector pose in base at ``q``, shape (4, 4).
+        tool: tool pose in base at ``q`` (the end effector when there is no tool), shape (4, 4).
+        ee_twist, tool_twist: ``(angular [rad/s], linear [m/s])`` w.r.t. base in base at the last step.
+        at_limit: joints on a position limit after the last step, shape (n,) bool.
+        velocity_scale: factor (<= 1) the last command was scaled by to respect the velocity limits.
+    """
+
+    def __init__(self, model: RobotModel, q0: np.ndarray):
+        self.model = model
+        self.q = np.array(q0, dtype=float)
+        self.qdot = np.zeros(model.dof)
+        self._ee_index = model.dof + 1
+        self._tool = model.tool
+        self._inverse_velocity_limits = 1.0 / model.velocity_limits
+        self.at_limit = np.zeros(model.dof, dtype=bool)
+        self.velocity_scale = 1.0
+        self.ee = np.eye(4)
+        self.tool = np.eye(4)
+        self.ee_twist = (np.zeros(3), np.zeros(3))
+        self.tool_twist = (np.zeros(3), np.zeros(3))
+        self._update_kinematics()
+
+    def step(self, command: np.ndarray | None, dt: float) -> None:
+        """Advance by ``dt`` seconds with joint rates ``command`` (None: zero), shape (n,)."""
+        model = self.model
+        if command is None or dt <= 0.0:
+            self.qdot[:] = 0.0
+            self.velocity_scale = 1.0
+        else:
+            # Scale the whole vector (not joint by joint) so the Cartesian direction holds.
+            peak = float(np.max(np.abs(command) * self._inverse_velocity_limits))
+            self.velocity_scale = 1.0 / peak if peak > 1.0 else 1.0
+            q_next = self.q + command * (self.velocity_scale * dt)
+            np.clip(q_next, model.lower, model.upper, out=q_next)
+            np.subtract(q_next, self.q, out=self.qdot)
+            self.qdot *= 1.0 / dt
+            self.q = q_next
+        np.logical_or(self.q <= model.lower, self.q >= model.upper, out=self.at_limit)
+        self._update_kinematics()
+
+    def _update_kinematics(self) -> None:
+        # The unrolled per-model code: pose and Jacobian in a few microseconds.
+        self.ee, jac = pose_and_jacobian_in_base(self.model, self.q, self._ee_index)
+        self.tool = self.ee @ self._tool if self._tool is not None else self.ee
+        wx, wy, wz = angular = jac[:3] @ self.qdot
+        linear = jac[3:] @ self.qdot
+        self.ee_twist = (angular, linear)
+        # Same rigid body: v_tool = v_ee + ω × (p_tool - p_ee).
+        rx, ry, rz = (self.tool[:3, 3] - self.ee[:3, 3]).tolist()
+        tool_linear = linear + np.array([wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx])
+        self.tool_twist = (angular, tool_linear)
+
+
+def initial_positions(model: RobotModel, values) -> np.ndarray:
+    """The ``initial_positions`` parameter checked against the model (default: start configuration)."""
+    if values is None or len(values) == 0:
+        return model.start_configuration()
+    if len(values) != model.dof:
+        raise JointCountError("parameter initial_positions", len(values), model.dof)
+    q = model.check_q(values, "initial_positions")
+    if not model.within_limits(q):
+        raise InvalidArgumentError(
+            f"parameter initial_positions {np.round(q, 4).tolist()} is outside the joint limits "
+            f"lower {np.round(model.lower, 4).tolist()}, upper {np.round(model.upper, 4).tolist()}"
+        )
+    return q
+
+
+class RobotStateNode(Node):
+    """ROS handles around one :class:`JointIntegrator`."""
+
+    def __init__(self, **node_kwargs):
+        super().__init__(NODE_NAME, **node_kwargs)
+        params = declare_parameters(self, PARAMETERS)
+        self.model = load_robot(params["robot"])
+        self.integrator = JointIntegrator(self.model, initial_positions(self.model, params["initial_positions"]))
+        self.base_frame = params["base_frame"] or self.model.base_frame
+        self.rate_hz = params["rate_hz"]
+        self.command_timeout_ns = int(params["command_timeout"] * 1e9)
+        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"]) if params["diagnostics_rate_hz"] > 0 else 0
+
+        self._command_sub = PolledSubscription(self, Float64MultiArray, "/joint_velocity_commands", 10)
+        self._joint_state_pub = self.create_publisher(JointState, "/joint_states", 10)
+        self._ee_pose_pub = self.create_publisher(PoseStamped, "/ee_pose", 10)
+        self._tool_pose_pub = self.create_publisher(PoseStamped, "/tool_pose", 10)
+        self._ee_twist_pub = self.create_publisher(TwistStamped, "/ee_twist", 10)
+        self._tool_twist_pub = self.create_publisher(TwistStamped, "/tool_twist", 10)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        self._description_pub = self.create_publisher(String, "/robot_description", latched)
+
+        # Messages go out pre-serialised (see conversions.PoseStampedCdr): half the publish cost.
+        self._joint_state_cdr = conv.JointStateCdr(self.model.joint_names)
+        self._pose_cdr = conv.PoseStampedCdr(self.base_frame)
+        self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
+
+        self._command: np.ndarray | None = None
+        self._command_time_ns = 0
+        self._last_cycle_ns = 0
+        self._last_diagnostics_ns = 0
+        self.rejected_commands = 0
+        self._warn = ThrottledLog(self.get_logger().warning, 1.0)
+
+        self._publish_description()
+        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
+        self.get_logger().info(
+            f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, "
+            f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
+        )
+        if self.loop.realtime_priority:
+            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
+        self.loop.start()
+
+    def _publish_description(self) -> None:
+        try:
+            from manip_kin.urdf import model_to_urdf
+        except ImportError as error:  # the exporter is optional for the simulation itself
+            self.get_logger().warning(f"/robot_description not published: {error}")
+            return
+        self._description_pub.publish(String(data=model_to_urdf(self.model)))
+
+    def _on_loop_error(self, error: BaseException) -> None:
+        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
+            self.loop.stop(timeout=0.0)
+            return
+        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
+
+    def _take_commands(self, now_ns: int) -> None:
+        dof = self.model.dof
+        while (msg := self._command_sub.take()) is not None:
+            values = np.frombuffer(msg.data, dtype=np.float64) if len(msg.data) else np.zeros(0)
+            problem = conv.command_problem(values, dof)
+            if problem is not None:
+                self.rejected_commands += 1
+                kind = "length" if values.shape[0] != dof else "finite"
+                self._warn(kind, f"rejected /joint_velocity_commands: {problem}; keeping the previous command")
+                continue
+            self._command = values.copy()
+            self._command_time_ns = now_ns
+
+    def _cycle(self, now_ns: int) -> None:
+        self._take_commands(now_ns)
+        dt = (now_ns - self._last_cycle_ns) * 1e-9 if self._last_cycle_ns else 0.0
+        # After a stall, integrate at most a few periods: a simulated arm does not jump.
+        dt = min(dt, 3.0 / self.rate_hz)
+        self._last_cycle_ns = now_ns
+        command = self._command
+        if command is not None and now_ns - self._command_time_ns > self.command_timeout_ns:
+            command = None
+        integrator = self.integrator
+        integrator.step(command, dt)
+
+        stamp_ns = self.get_clock().now().nanoseconds
+        self._joint_state_pub.publish(self._joint_state_cdr.encode(stamp_ns, integrator.q, integrator.qdot))
+        self._ee_pose_pub.publish(self._pose_cdr.encode(stamp_ns, integrator.ee))
+        self._tool_pose_pub.publish(self._pose_cdr.encode(stamp_ns, integrator.tool))
+        self._ee_twist_pub.publish(self._twist_cdr.encode(stamp_ns, *integrator.ee_twist))
+        self._tool_twist_pub.publish(self._twist_cdr.encode(stamp_ns, *integrator.tool_twist))
+
+        if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
+            self._last_diagnostics_ns = now_ns
+            self._publish_diagnostics(conv.ns_to_stamp(stamp_ns), now_ns, command is not None)
+
+    def _publish_diagnostics(self, stamp, now_ns: int, command_fresh: bool) -> None:
+        integrator = self.integrator
+        if self._command is None:
+            command_state = "none yet"
+        else:
+            command_state = "fresh" if command_fresh else "stale (counted as zero)"
+        limited = [self.model.joint_names[i] for i in np.flatnonzero(integrator.at_limit)]
+        values = [
+            ("robot", self.model.name),
+            ("command", command_state),
+            ("command_age_s", f"{(now_ns - self._command_time_ns) * 1e-9:.4f}" if self._command is not None else "inf"),
+            ("rejected_commands", str(self.rejected_commands)),
+            ("joints_at_limit", ",".join(limited)),
+            ("velocity_scale", f"{integrator.velocity_scale:.4f}"),
+        ] + stats_key_values(self.loop.stats())
+        level = "warn" if limited or self.rejected_commands else "ok"
+        status = conv.make_diagnostic_status(self.get_name(), level, command_state, self.model.name, values)
+        self._diagnostics_pub.publish(conv.make_diagnostic_array(stamp, [status]))
+
+    def stop(self) -> None:
+        """Stop the loop thread (before the node is destroyed)."""
+        self.loop.stop()
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``robot_state`` executable."""
+    return run_node(RobotStateNode, USAGE, argv, on_shutdown=lambda node: node.stop())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,275 @@
+"""``trajectory_generator``: streams a straight-line goal from the current tool pose to a target.
+
+On each valid ``/line_target`` the node plans a :class:`~manip_kin.trajectory.LineTrajectory`
+from the newest ``/tool_pose``, checks the arm can follow it
+(:func:`~manip_kin.trajectory.check_line_reachable` from the newest ``/joint_states``),
+publishes it on ``/planned_path`` and then, every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop`, publishes the sampled ``/goal_pose`` and
+``/goal_twist`` until the end. At the end it publishes the final pose once with a zero
+twist and stops streaming: the controller holds its last goal, and a goal sent later by
+hand (``manip_kin goal``) is not overwritten. A new target pre-empts a running line, from
+the current tool pose; a rejected target leaves a running line alone.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Path
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from manip_kin.errors import ManipKinError
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.runner import run_node
+from manip_kin.robots import load_robot
+from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, check_line_reachable
+
+NODE_NAME = "trajectory_generator"
+
+#: States reported on /diagnostics.
+STATES = ("idle", "streaming", "holding", "rejected")
+
+PARAMETERS = (
+    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file (for the reach check)"),
+    ParamSpec("rate_hz", "float", 500.0, "rate of /goal_pose and /goal_twist while a line runs", "Hz", positive=True),
+    ParamSpec("time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS),
+    ParamSpec("max_linear_velocity", "float", 0.25, "speed limit of the position (the constant speed of 'constant')", "m/s", positive=True),
+    ParamSpec("max_linear_acceleration", "float", 0.5, "acceleration limit of the position (not used by 'constant')", "m/s^2", positive=True),
+    ParamSpec("max_angular_velocity", "float", 0.5, "angular speed limit of the orientation", "rad/s", positive=True),
+    ParamSpec("max_angular_acceleration", "float", 1.0, "angular acceleration limit (not used by 'constant')", "rad/s^2", positive=True),
+    ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits"),
+    ParamSpec("base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"),
+    ParamSpec("tool_pose_timeout", "float", 0.5, "a target is rejected when /tool_pose is older than this", "s", positive=True),
+    ParamSpec("quaternion_tolerance", "float", 1e-2, "a target quaternion whose length differs from 1 by more is rejected", positive=True),
+    ParamSpec("path_points", "int", 50, "poses in /planned_path", positive=True),
+    ParamSpec("diagnostics_rate_hz", "float", 5.0, "rate of /diagnostics (also sent at once on a state change)", "Hz", positive=True),
+    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+)
+
+USAGE = usage_text(
+    NODE_NAME,
+    "Straight-line goals: on a /line_target pose, plans a line from the current /tool_pose\n"
+    "(position along the segment, orientation by slerp) timed by time_scaling within the\n"
+    "velocity and acceleration limits, checks the arm can follow it from the current\n"
+    "/joint_states, and streams /goal_pose and /goal_twist at rate_hz until the end, then\n"
+    "publishes the final pose once and holds. A new target pre-empts the running line.\n"
+    "Unreachable or malformed targets are rejected with a log line.",
+    PARAMETERS,
+    subscribes=[
+        ("/line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
+        ("/tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
+        ("/joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
+    ],
+    publishes=[
+        ("/goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
+        ("/goal_twist", "geometry_msgs/TwistStamped", "the line's velocity (feed-forward)"),
+        ("/planned_path", "nav_msgs/Path", "the planned line, transient local"),
+        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, progress, target and final goal stamps"),
+    ],
+    example=f"{NODE_NAME} --ros-args -p robot:=irb120 -p time_scaling:=constant -p max_linear_velocity:=0.4",
+)
+
+
+class TrajectoryGeneratorNode(Node):
+    """ROS handles around the running :class:`~manip_kin.trajectory.LineTrajectory`."""
+
+    def __init__(self, **node_kwargs):
+        super().__init__(NODE_NAME, **node_kwargs)
+        params = declare_parameters(self, PARAMETERS)
+        self.model = load_robot(params["robot"])
+        self.base_frame = params["base_frame"] or self.model.base_frame
+        self.rate_hz = params["rate_hz"]
+        self.time_scaling = params["time_scaling"]
+        self.limits = MotionLimits(
+            max_linear_velocity=params["max_linear_velocity"],
+            max_linear_acceleration=params["max_linear_acceleration"],
+            max_angular_velocity=params["max_angular_velocity"],
+            max_angular_acceleration=params["max_angular_acceleration"],
+        )
+        self.check_reach = params["check_reach"]
+        self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
+        self._quaternion_tolerance = params["quaternion_tolerance"]
+        self._path_points = max(2, params["path_points"])
+        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+
+        self._target_sub = PolledSubscription(self, PoseStamped, "/line_target", 10)
+        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "/tool_pose", 10)
+        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 10)
+        self._goal_pub = self.create_publisher(PoseStamped, "/goal_pose", 10)
+        self._twist_pub = self.create_publisher(TwistStamped, "/goal_twist", 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        self._path_pub = self.create_publisher(Path, "/planned_path", latched)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._goal_cdr = conv.PoseStampedCdr(self.base_frame)
+        self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
+        self._mapper = conv.JointStateMapper(self.model.joint_names)
+
+        self._tool_pose_msg: PoseStamped | None = None
+        self._tool_pose_time_ns = 0
+        self._joint_state_msg: JointState | None = None
+        self.line: LineTrajectory | None = None
+        self._line_start_ns = 0
+        self.state = "idle"
+        self.detail = "no target yet"
+        self.target_stamp = ""
+        self.final_goal_stamp = ""
+        self.progress = 0.0
+        self.rejected_targets = 0
+        self.rejected_stamp = ""
+        self.last_rejection = ""
+        self._last_diagnostics_ns = 0
+        self._warn = ThrottledLog(self.get_logger().warning, 0.5)
+
+        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
+        self.get_logger().info(
+            f"robot {self.model.name}: {self.time_scaling} lines at <= {self.limits.max_linear_velocity:g} m/s, "
+            f"{self.limits.max_angular_velocity:g} rad/s, streamed at {self.rate_hz:g} Hz"
+        )
+        if self.loop.realtime_priority:
+            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
+        self.loop.start()
+
+    # --- inputs --------------------------------------------------------------------------------
+
+    def _take_inputs(self, now_ns: int) -> PoseStamped | None:
+        """Drain the inputs; return the newest valid target (None when there is none)."""
+        while (msg := self._tool_pose_sub.take()) is not None:
+            self._tool_pose_msg = msg
+            self._tool_pose_time_ns = now_ns
+        while (msg := self._joint_state_sub.take()) is not None:
+            self._joint_state_msg = msg
+        target = None
+        while (msg := self._target_sub.take()) is not None:
+            problem = conv.pose_problem(msg, self.base_frame, "line target", self._quaternion_tolerance)
+            if problem is not None:
+                self._reject(msg, problem)
+                continue
+            target = msg
+        return target
+
+    def _reject(self, msg: PoseStamped, reason: str) -> None:
+        self.rejected_targets += 1
+        self.last_rejection = reason
+        # A rejected target does not replace the running line's target_stamp.
+        self.rejected_stamp = conv.stamp_key(msg.header.stamp)
+        kept = "the running line goes on" if self.state == "streaming" else "nothing to do"
+        self.get_logger().error(f"rejected /line_target: {reason}; {kept}")
+        if self.state != "streaming":
+            self.state, self.detail = "rejected", reason
+
+    # --- planning ----------------------------------------------------------------------------------
+
+    def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
+        """Plan a line to ``target_msg``; True when it replaced the running line."""
+        if self._tool_pose_msg is None or now_ns - self._tool_pose_time_ns > self._tool_pose_timeout_ns:
+            self._reject(target_msg, "no current /tool_pose (is robot_state running?)")
+            return False
+        tool_problem = conv.pose_problem(self._tool_pose_msg, self.base_frame, "tool pose", self._quaternion_tolerance)
+        if tool_problem is not None:
+            self._reject(target_msg, f"cannot start from the current tool pose: {tool_problem}")
+            return False
+        start = conv.pose_stamped_to_matrix(self._tool_pose_msg)
+        goal = conv.pose_stamped_to_matrix(target_msg)
+        try:
+            line = LineTrajectory.plan(start, goal, self.time_scaling, self.limits)
+            if self.check_reach:
+                if self._joint_state_msg is None:
+                    self._reject(target_msg, "no /joint_states received yet for the reach check")
+                    return False
+                q = self._mapper.positions(self._joint_state_msg)
+                report = check_line_reachable(self.model, line, q)
+                if not report.reachable:
+                    self._reject(target_msg, report.reason)
+                    return False
+        except ManipKinError as error:
+            self._reject(target_msg, str(error))
+            return False
+        preempted = self.state == "streaming"
+        self.line = line
+        self._line_start_ns = now_ns
+        self.target_stamp = conv.stamp_key(target_msg.header.stamp)
+        self.final_goal_stamp = ""
+        self.state, self.detail = "streaming", f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
+        self.get_logger().info(
+            f"{'pre-empted the running line; ' if preempted else ''}streaming a {self.time_scaling} line "
+            f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {self.detail}"
+        )
+        self._publish_path(line)
+        return True
+
+    def _publish_path(self, line: LineTrajectory) -> None:
+        path = Path()
+        stamp = self.get_clock().now().to_msg()
+        path.header.stamp = stamp
+        path.header.frame_id = self.base_frame
+        path.poses = [conv.make_pose_stamped(pose, self.base_frame, stamp) for pose in line.sample_path(self._path_points)]
+        self._path_pub.publish(path)
+
+    # --- the cycle -------------------------------------------------------------------------------
+
+    def _cycle(self, now_ns: int) -> None:
+        target = self._take_inputs(now_ns)
+        previous_state = self.state
+        if target is not None:
+            self._plan(target, now_ns)
+        if self.state == "streaming" and self.line is not None:
+            elapsed = (now_ns - self._line_start_ns) * 1e-9
+            line = self.line
+            finished = elapsed >= line.duration
+            pose, (angular, linear) = line.sample(min(elapsed, line.duration) if not finished else line.duration)
+            stamp_ns = self.get_clock().now().nanoseconds
+            self.progress = line.scaling.evaluate(elapsed)[0] if not finished else 1.0
+            self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
+            self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
+            if finished:
+                self.final_goal_stamp = conv.stamp_key(conv.ns_to_stamp(stamp_ns))
+                self.state, self.detail = "holding", "line finished, final pose sent"
+                self.get_logger().info(f"line finished after {elapsed:.3f} s; holding the final pose")
+        if self.state != previous_state or now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
+            self._last_diagnostics_ns = now_ns
+            self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        line = self.line
+        values = [
+            ("state", self.state),
+            ("detail", self.detail),
+            ("target_stamp", self.target_stamp),
+            ("final_goal_stamp", self.final_goal_stamp),
+            ("progress", f"{self.progress:.4f}"),
+            ("duration", f"{line.duration:.4f}" if line is not None else ""),
+            ("length", f"{line.length:.6f}" if line is not None else ""),
+            ("time_scaling", self.time_scaling),
+            ("rejected_targets", str(self.rejected_targets)),
+            ("rejected_stamp", self.rejected_stamp),
+            ("last_rejection", self.last_rejection),
+        ] + stats_key_values(self.loop.stats())
+        level = "warn" if self.state == "rejected" else "ok"
+        status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
+        self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+
+    def _on_loop_error(self, error: BaseException) -> None:
+        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
+            self.loop.stop(timeout=0.0)
+            return
+        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
+
+    def stop(self) -> None:
+        """Stop the loop thread (before the node is destroyed)."""
+        self.loop.stop()
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``trajectory_generator`` executable."""
+    return run_node(TrajectoryGeneratorNode, USAGE, argv, on_shutdown=lambda node: node.stop())
+
+
+if __name__ == "__main__":
+    sys.exit(main())
