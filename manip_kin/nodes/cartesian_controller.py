@@ -149,12 +149,12 @@ class CartesianControllerNode(Node):
                 self._q_time_ns = now_ns
             except conv.InvalidMessageError as error:
                 self.rejected_joint_states += 1
-                self._warn("joint_state", f"rejected /joint_states: {error}")
+                self._warn("joint_state:" + conv.problem_kind(str(error)), f"rejected /joint_states: {error}")
         while (msg := self._goal_sub.take()) is not None:
             problem = conv.pose_problem(msg, self.base_frame, "goal pose", self._quaternion_tolerance)
             if problem is not None:
                 self.rejected_goals += 1
-                self._warn("goal", f"rejected /goal_pose: {problem}; keeping the previous goal")
+                self._warn("goal:" + conv.problem_kind(problem), f"rejected /goal_pose: {problem}; keeping the previous goal")
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
             self.goal_stamp = conv.stamp_key(msg.header.stamp)
@@ -163,7 +163,7 @@ class CartesianControllerNode(Node):
             problem = conv.twist_problem(msg, self.base_frame, "goal twist")
             if problem is not None:
                 self.rejected_twists += 1
-                self._warn("twist", f"rejected /goal_twist: {problem}; feed-forward not used")
+                self._warn("twist:" + conv.problem_kind(problem), f"rejected /goal_twist: {problem}; feed-forward not used")
                 continue
             angular, linear = conv.twist_to_arrays(msg.twist)
             self._twist = (angular, linear)

@@ -515,3 +515,19 @@ class Float64ArrayCdr:
     def encode(self, values: np.ndarray) -> bytes:
         """CDR bytes of ``values``, shape (size,)."""
         return self._struct.pack(_CDR_LE, 0, 0, self._size, *values.tolist())
+
+
+def problem_kind(reason: str) -> str:
+    """A short class of a rejection reason (``frame``, ``finite``, ``quaternion``, ``length``, ``other``).
+
+    Log throttling keys on it, so one kind of bad message cannot hide another.
+    """
+    if "frame_id" in reason:
+        return "frame"
+    if "NaN" in reason:
+        return "finite"
+    if "quaternion" in reason:
+        return "quaternion"
+    if "values; valid" in reason or "names but" in reason or "lacks joints" in reason:
+        return "length"
+    return "other"

@@ -213,8 +213,7 @@ class RobotStateNode(Node):
             problem = conv.command_problem(values, dof)
             if problem is not None:
                 self.rejected_commands += 1
-                kind = "length" if values.shape[0] != dof else "finite"
-                self._warn(kind, f"rejected /joint_velocity_commands: {problem}; keeping the previous command")
+                self._warn(conv.problem_kind(problem), f"rejected /joint_velocity_commands: {problem}; keeping the previous command")
                 continue
             self._command = values.copy()
             self._command_time_ns = now_ns

@@ -1,0 +1,141 @@
+"""trajectory_generator alone: plans from the tool pose, streams the line, rejects bad targets."""
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from nav_msgs.msg import Path
+from sensor_msgs.msg import JointState
+
+from manip_kin.kinematics import frame_pose
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.trajectory_generator import TrajectoryGeneratorNode
+from manip_kin.robots import load_robot
+from manip_kin.rotations import make_transform, rpy_to_matrix
+from manip_kin.trajectory import distance_to_segment
+from node_harness import Harness, statuses
+
+MODEL = load_robot("irb120")
+Q0 = np.zeros(6)
+START = frame_pose(MODEL, Q0)  # [0.374, 0, 0.630], orientation I
+TARGET = make_transform(np.eye(3), [0.374, 0.15, 0.55])
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+def _start(harness, **params):
+    goals = harness.collect(PoseStamped, "/goal_pose")
+    twists = harness.collect(TwistStamped, "/goal_twist")
+    paths = harness.collect(Path, "/planned_path", latched=True)
+    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=200.0, **params)
+    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+        harness.wait_matched(topic, msg_type)
+    return node, goals, twists, paths, diagnostics
+
+
+def _state_stream(harness, pose=START, q=Q0):
+    def stream():
+        harness.publish("/tool_pose", conv.make_pose_stamped(pose, "base_link"))
+        harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, q))
+
+    return stream
+
+
+@pytest.mark.parametrize("scaling", ["trapezoidal", "quintic", "constant"])
+def test_streams_line_then_holds(harness, scaling):
+    node, goals, twists, paths, diagnostics = _start(harness, time_scaling=scaling, max_linear_velocity=0.3, max_linear_acceleration=1.0)
+    stream = _state_stream(harness)
+    harness.spin_for(0.1, every=stream)
+    assert not goals  # nothing streamed before a target
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link", conv.ns_to_stamp(77)))
+    assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
+    harness.spin_for(0.1, every=stream)
+    length = np.linalg.norm(TARGET[:3, 3] - START[:3, 3])
+    path = paths[-1]
+    assert path.header.frame_id == "base_link" and len(path.poses) == 50
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(path.poses[0]), START, atol=1e-9)
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(path.poses[-1]), TARGET, atol=1e-9)
+    assert all(g.header.frame_id == "base_link" for g in goals) and len(goals) == len(twists)
+    positions = np.array([[g.pose.position.x, g.pose.position.y, g.pose.position.z] for g in goals])
+    assert distance_to_segment(positions, START[:3, 3], TARGET[:3, 3]).max() < 1e-9
+    progress = np.linalg.norm(positions - START[:3, 3], axis=1)
+    assert np.all(np.diff(progress) >= -1e-12)
+    stamps = [conv.stamp_to_ns(g.header.stamp) for g in goals]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    duration = (stamps[-1] - stamps[0]) * 1e-9
+    expected = {"constant": length / 0.3, "quintic": max(1.875 * length / 0.3, math.sqrt(5.7735 * length / 1.0))}
+    if scaling in expected:
+        assert abs(duration - expected[scaling]) < 0.05
+    speeds = np.array([np.linalg.norm(conv.twist_to_arrays(t.twist)[1]) for t in twists])
+    assert speeds.max() <= 0.3 + 1e-9
+    # Twist direction is the line direction; the last goal is the target with zero twist.
+    direction = (TARGET[:3, 3] - START[:3, 3]) / length
+    moving = [conv.twist_to_arrays(t.twist)[1] for t in twists if np.linalg.norm(conv.twist_to_arrays(t.twist)[1]) > 1e-6]
+    np.testing.assert_allclose([v / np.linalg.norm(v) for v in moving], np.tile(direction, (len(moving), 1)), atol=1e-9)
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(goals[-1]), TARGET, atol=1e-12)
+    assert not any(np.concatenate(conv.twist_to_arrays(twists[-1].twist)))
+    # Holding: no more streaming.
+    count = len(goals)
+    harness.spin_for(0.2, every=stream)
+    assert len(goals) == count
+    held = [s for s in statuses(diagnostics, "trajectory_generator") if s.message == "holding"]
+    values = {kv.key: kv.value for kv in held[-1].values}
+    assert values["target_stamp"] == "0.000000077" and values["final_goal_stamp"] == conv.stamp_key(goals[-1].header.stamp)
+
+
+def test_rejects_bad_and_unreachable_targets(harness, capfd):
+    node, goals, _, _, diagnostics = _start(harness)
+    stream = _state_stream(harness)
+    harness.spin_for(0.1, every=stream)
+    nan = conv.make_pose_stamped(TARGET, "base_link")
+    nan.pose.position.z = math.nan
+    wrong_frame = conv.make_pose_stamped(TARGET, "tool0")
+    zero_quat = conv.make_pose_stamped(TARGET, "base_link")
+    zero_quat.pose.orientation.w = 0.0
+    unreachable = conv.make_pose_stamped(make_transform(np.eye(3), [1.5, 0.0, 0.6]), "base_link", conv.ns_to_stamp(5))
+    for msg in (nan, wrong_frame, zero_quat, unreachable):
+        harness.publish("/line_target", msg)
+    assert harness.spin_until(lambda: node.rejected_targets == 4, 5, every=stream)
+    harness.spin_for(0.1, every=stream)
+    assert not goals and node.state == "rejected"
+    logged = capfd.readouterr().err
+    assert "NaN or infinity" in logged and "'tool0' is not the base frame" in logged and "has length 0" in logged
+    assert "leaves the arm's reach" in logged
+    values = {kv.key: kv.value for kv in statuses(diagnostics, "trajectory_generator")[-1].values}
+    assert values["rejected_stamp"] == "0.000000005" and "reach" in values["last_rejection"]
+    # Still works afterwards.
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
+    assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
+
+
+def test_no_tool_pose_rejected(harness):
+    node, goals, _, _, _ = _start(harness)
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
+    assert harness.spin_until(lambda: node.rejected_targets == 1, 3)
+    assert "no current /tool_pose" in node.last_rejection and not goals
+
+
+def test_new_target_preempts_from_current_pose(harness):
+    node, goals, _, paths, _ = _start(harness, max_linear_velocity=0.1)
+    stream = _state_stream(harness)
+    harness.spin_for(0.1, every=stream)
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
+    assert harness.spin_until(lambda: node.state == "streaming" and len(goals) > 20, 3, every=stream)
+    # The arm is now elsewhere: the new line starts from the tool pose it reports.
+    moved = make_transform(rpy_to_matrix(0.0, 0.1, 0.0), [0.38, 0.02, 0.62])
+    second = make_transform(np.eye(3), [0.40, -0.05, 0.60])
+    stream = _state_stream(harness, moved)
+    harness.spin_for(0.1, every=stream)
+    harness.publish("/line_target", conv.make_pose_stamped(second, "base_link"))
+    assert harness.spin_until(lambda: len(paths) >= 2, 3, every=stream)
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(paths[-1].poses[0]), moved, atol=1e-6)
+    assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(goals[-1]), second, atol=1e-12)

@@ -1,0 +1,151 @@
+"""robot_state alone: what it publishes, how it integrates, what it rejects."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+
+from manip_kin.errors import JointCountError, UnknownRobotError
+from manip_kin.kinematics import frame_pose, frame_twist
+from manip_kin.nodes.conversions import array_to_multiarray, pose_stamped_to_matrix, stamp_to_seconds, twist_to_arrays
+from manip_kin.nodes.robot_state import RobotStateNode
+from manip_kin.robots import load_robot
+from node_harness import Harness, statuses
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+def _latest(received):
+    return received[-1] if received else None
+
+
+def test_publishes_state_poses_twists_and_description(harness):
+    model = load_robot("genova7")
+    joint_states = harness.collect(JointState, "/joint_states")
+    ee_poses = harness.collect(PoseStamped, "/ee_pose")
+    tool_poses = harness.collect(PoseStamped, "/tool_pose")
+    ee_twists = harness.collect(TwistStamped, "/ee_twist")
+    tool_twists = harness.collect(TwistStamped, "/tool_twist")
+    harness.start(RobotStateNode, robot="genova7", rate_hz=200.0)
+    assert harness.spin_until(lambda: len(joint_states) > 20 and len(tool_poses) > 20 and tool_twists and ee_twists and ee_poses, 10)
+    # Latched: a subscriber that joins late still gets the description.
+    descriptions = harness.collect(String, "/robot_description", latched=True)
+    assert harness.spin_until(lambda: descriptions, 5)
+    assert "<robot" in descriptions[0].data and all(name in descriptions[0].data for name in model.joint_names)
+
+    state = joint_states[-1]
+    assert list(state.name) == model.joint_names
+    assert len(state.position) == 7 and len(state.velocity) == 7
+    q0 = model.start_configuration()
+    np.testing.assert_allclose(state.position, q0, atol=1e-12)
+    np.testing.assert_allclose(state.velocity, 0.0, atol=1e-12)
+    assert abs(stamp_to_seconds(state.header.stamp) - time.time()) < 1.0
+    stamps = [stamp_to_seconds(m.header.stamp) for m in joint_states]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    # 200 Hz: consecutive stamps ~5 ms apart on average.
+    assert 0.003 < (stamps[-1] - stamps[0]) / (len(stamps) - 1) < 0.008
+
+    tool = tool_poses[-1]
+    assert tool.header.frame_id == "base_link"
+    np.testing.assert_allclose(pose_stamped_to_matrix(tool), frame_pose(model, q0, "tool"), atol=1e-9)
+    # robots.md sanity value of the genova7 tool at q0.
+    np.testing.assert_allclose(pose_stamped_to_matrix(tool)[:3, 3], [0.0, -1.1369, 0.2327], atol=1e-4)
+    np.testing.assert_allclose(pose_stamped_to_matrix(ee_poses[-1]), frame_pose(model, q0, "ee"), atol=1e-9)
+    for twist in (ee_twists[-1], tool_twists[-1]):
+        assert twist.header.frame_id == "base_link"
+        assert not any(np.concatenate(twist_to_arrays(twist.twist)))
+
+
+def test_integrates_commands_with_twists_and_times_out(harness):
+    model = load_robot("irb120")
+    joint_states = harness.collect(JointState, "/joint_states")
+    ee_twists = harness.collect(TwistStamped, "/ee_twist")
+    tool_poses = harness.collect(PoseStamped, "/tool_pose")
+    harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, command_timeout=0.1)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
+    send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
+    harness.spin_for(0.6, every=send, period=0.01)
+    state = joint_states[-1]
+    np.testing.assert_allclose(state.velocity, command, atol=1e-9)
+    moved = np.array(state.position)
+    assert 0.2 * 0.3 < moved[0] < 0.2 * 0.8  # integrated for about 0.6 s of commands
+    np.testing.assert_allclose(moved, command * (moved[0] / command[0]), atol=1e-9)  # moved along the command
+    # Twist = J(q) q̇ at the same cycle (the ee twist message with the same stamp).
+    by_stamp = {stamp_to_seconds(m.header.stamp): m for m in ee_twists}
+    state = next(s for s in reversed(joint_states) if stamp_to_seconds(s.header.stamp) in by_stamp)
+    twist = by_stamp[stamp_to_seconds(state.header.stamp)]
+    assert np.linalg.norm(twist_to_arrays(twist.twist)[1]) > 0.01
+    angular, linear = frame_twist(model, np.array(state.position), np.array(state.velocity), "ee")
+    np.testing.assert_allclose(twist_to_arrays(twist.twist)[0], angular, atol=1e-9)
+    np.testing.assert_allclose(twist_to_arrays(twist.twist)[1], linear, atol=1e-9)
+    # Commands stop: after command_timeout the arm holds still.
+    harness.spin_for(0.4)
+    held = np.array(joint_states[-1].position)
+    np.testing.assert_allclose(joint_states[-1].velocity, 0.0)
+    harness.spin_for(0.2)
+    np.testing.assert_array_equal(joint_states[-1].position, held)
+    np.testing.assert_allclose(pose_stamped_to_matrix(tool_poses[-1]), frame_pose(model, held), atol=1e-9)
+
+
+def test_rejects_bad_commands_and_keeps_running(harness, capfd):
+    joint_states = harness.collect(JointState, "/joint_states")
+    node = harness.start(RobotStateNode, robot="irb120", rate_hz=250.0)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    for bad in ([0.1] * 5, [0.1] * 7, [math.nan, 0, 0, 0, 0, 0], [0, 0, math.inf, 0, 0, 0], []):
+        harness.publish("/joint_velocity_commands", Float64MultiArray(data=[float(v) for v in bad]))
+        harness.spin_for(0.05)
+    assert harness.spin_until(lambda: node.rejected_commands == 5, 3)
+    harness.spin_for(0.2)
+    assert np.all(np.isfinite(joint_states[-1].position))
+    np.testing.assert_allclose(joint_states[-1].position, 0.0)
+    np.testing.assert_allclose(joint_states[-1].velocity, 0.0)
+    # The node still obeys a good command afterwards.
+    harness.spin_for(0.3, every=lambda: harness.publish("/joint_velocity_commands", Float64MultiArray(data=[0.5, 0, 0, 0, 0, 0])))
+    assert joint_states[-1].position[0] > 0.05
+    logged = capfd.readouterr().err
+    assert "has 5 values; valid: 6" in logged and "NaN or infinity" in logged
+
+
+def test_position_and_velocity_limits(harness):
+    model = load_robot("genova7")
+    joint_states = harness.collect(JointState, "/joint_states")
+    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    harness.start(RobotStateNode, robot="genova7", rate_hz=250.0, diagnostics_rate_hz=20.0)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    # Prismatic joint6 starts at 0.15 m; drive it down at its 0.5 m/s limit: it stops at 0.
+    down = np.zeros(7)
+    down[5] = -0.5
+    harness.spin_for(0.6, every=lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(down)))
+    state = joint_states[-1]
+    assert state.position[5] == 0.0 and state.velocity[5] == 0.0
+    assert harness.spin_until(lambda: any(s.values and "joint6" in dict((kv.key, kv.value) for kv in s.values)["joints_at_limit"] for s in statuses(diagnostics, "robot_state")), 2)
+    # 10 rad/s on joint1 and 1 rad/s on joint2: scaled together to joint1's 2 rad/s limit.
+    fast = np.zeros(7)
+    fast[0], fast[1] = 10.0, 1.0
+    harness.spin_for(0.3, every=lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(fast)))
+    np.testing.assert_allclose(joint_states[-1].velocity[:2], [2.0, 0.2], atol=1e-9)
+    assert model.within_limits(joint_states[-1].position)
+
+
+def test_bad_parameters_stop_the_node(harness):
+    with pytest.raises(JointCountError, match="initial_positions"):
+        harness.start(RobotStateNode, robot="irb120", initial_positions=[0.0, 0.0])
+    with pytest.raises(UnknownRobotError, match="nosuchbot"):
+        harness.start(RobotStateNode, robot="nosuchbot")
+    with pytest.raises(ValueError, match="outside the joint limits"):
+        harness.start(RobotStateNode, robot="irb120", initial_positions=[4.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="rate_hz"):
+        harness.start(RobotStateNode, robot="irb120", rate_hz=-5.0)
+    node = harness.start(RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100)  # integers accepted
+    np.testing.assert_allclose(node.integrator.q, [0, 1, 0, 0, 0, 0])
