@@ -160,6 +160,7 @@ def pipeline_processes(
     generator: Mapping[str, object] | None = None,
     robot_state: Mapping[str, object] | None = None,
     params_file: str | None = None,
+    realtime_priority: int = 0,
 ) -> list[NodeProcess]:
     """The three pipeline nodes for ``robot`` at ``rate_hz``, with extra parameters per node.
 
@@ -171,8 +172,12 @@ def pipeline_processes(
         generator: extra trajectory_generator parameters (time_scaling, limits...).
         robot_state: extra robot_state parameters.
         params_file: a ``--params-file`` given to every node (``-p`` values override it).
+        realtime_priority: SCHED_FIFO priority of every node's loop thread (0 = normal
+            scheduling); keeps the loops on time on a busy machine where permitted.
     """
     common = {"robot": robot, "rate_hz": float(rate_hz)}
+    if realtime_priority:
+        common["realtime_priority"] = int(realtime_priority)
     state = dict(common, **(robot_state or {}))
     if initial_positions is not None:
         state["initial_positions"] = [float(v) for v in initial_positions]

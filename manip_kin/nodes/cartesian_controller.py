@@ -45,7 +45,7 @@ PARAMETERS = (
     ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
     ParamSpec("joint_state_timeout", "float", 0.1, "no joint state for longer than this: publish zeros", "s", positive=True),
     ParamSpec("goal_timeout", "float", 0.0, "a goal older than this is dropped and zeros published (0 = goals never expire)", "s", minimum=0.0),
-    ParamSpec("goal_twist_timeout", "float", 0.05, "the feed-forward twist is used while younger than this", "s", positive=True),
+    ParamSpec("goal_twist_timeout", "float", 0.02, "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)", "s", positive=True),
     ParamSpec("position_tolerance", "float", 1e-4, "converged when the position error is below this", "m", positive=True),
     ParamSpec("orientation_tolerance", "float", 1e-3, "... and the orientation error below this", "rad", positive=True),
     ParamSpec("quaternion_tolerance", "float", 1e-2, "a goal quaternion whose length differs from 1 by more is rejected", positive=True),
