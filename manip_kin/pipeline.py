@@ -171,7 +171,9 @@ def pipeline_processes(
         controller: extra cartesian_controller parameters (gains, tolerances...).
         generator: extra trajectory_generator parameters (time_scaling, limits...).
         robot_state: extra robot_state parameters.
-        params_file: a ``--params-file`` given to every node (``-p`` values override it).
+        params_file: a ``--params-file`` given to every node. ROS resolves a key found in the
+            file's node-name section before ``-p`` values (which act like ``/**`` entries), so
+            the file wins for the keys it sets per node.
         realtime_priority: SCHED_FIFO priority of every node's loop thread (0 = normal
             scheduling); keeps the loops on time on a busy machine where permitted.
     """

@@ -1,0 +1,62 @@
+"""`colcon build`, then the pipeline from install/manip_kin/lib/manip_kin, as `ros2 run` would run it."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from manip_kin.pipeline import Pipeline, pipeline_processes
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """A colcon build of this package: (lib dir of the executables, environment of setup.bash)."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        colcon = shutil.which("colcon")
+    if colcon is None:
+        pytest.skip("colcon is not installed")
+    workspace = tmp_path_factory.mktemp("colcon_pipeline_ws")
+    result = subprocess.run(
+        [str(colcon), "build", "--base-paths", str(REPO), "--build-base", "build", "--install-base", "install",
+         "--packages-select", "manip_kin", "--event-handlers", "console_direct-"],
+        cwd=workspace, env=dict(os.environ, COLCON_HOME=str(workspace / ".colcon")),
+        capture_output=True, text=True, timeout=300,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    prefix = workspace / "install" / "manip_kin"
+    site = next(prefix.glob("lib/python3*/site-packages"))
+    env = dict(os.environ)
+    # What install/setup.bash puts in front: the package's site-packages and prefix.
+    env["PYTHONPATH"] = os.pathsep.join([str(site), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix), env.get("AMENT_PREFIX_PATH", sys.prefix)])
+    return prefix / "lib" / "manip_kin", prefix / "share" / "manip_kin", env
+
+
+def test_installed_pipeline_reaches_goal(installed, tmp_path):
+    lib, share, env = installed
+    params_file = share / "config" / "genova7_pipeline.yaml"
+    assert params_file.is_file()
+    processes = pipeline_processes("genova7", params_file=str(params_file))
+    with Pipeline(processes, executable_dir=lib, env=env, log_dir=tmp_path) as pipeline:
+        # The nodes run the installed code, not the source tree.
+        for name in ("robot_state", "cartesian_controller"):
+            command_line = Path(f"/proc/{pipeline.pid(name)}/cmdline").read_bytes().split(b"\0")
+            assert str(lib).encode() in command_line[1], command_line
+        result = subprocess.run(
+            [str(lib / "manip_kin"), "goal", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "30", "--json"],
+            env=pipeline.env, capture_output=True, text=True, timeout=60,
+        )
+        assert result.returncode == 0, result.stderr + pipeline.log_tail("cartesian_controller")
+        payload = json.loads(result.stdout)
+        assert payload["converged"] and payload["final_error"]["position"] < 1e-4
+        # The scenario gains came from the installed example params file.
+        assert "gains 0.8/0.8 1/s" in pipeline.log_text("cartesian_controller")
