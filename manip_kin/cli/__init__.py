@@ -18,6 +18,7 @@ from manip_kin.errors import ManipKinError
 COMMAND_MODULES = (
     "manip_kin.cli.model_commands",
     "manip_kin.cli.ros_commands",
+    "manip_kin.cli.recording_commands",
 )
 
 

@@ -1,0 +1,447 @@
+"""Write rosbag2-compatible MCAP recordings (``ros2 bag info/play``, Foxglove, rosbags).
+
+One file per recording. The output is either a single ``.mcap`` file (needs no
+``metadata.yaml``) or a bag directory ``NAME/`` holding ``NAME_0.mcap`` and a
+``metadata.yaml`` that agrees with it, as ``ros2 bag record -s mcap`` leaves.
+
+Durability: chunks are small and finished at least every ``flush_interval_s``
+seconds and handed to the OS, so a SIGKILL loses at most about that much; the
+salvage reader (:func:`manip_kin.recording.reader.salvage`) recovers the rest.
+:meth:`RecordingWriter.close` writes the summary and footer that make the
+file complete (and the ``rosbag2`` metadata record and ``metadata.yaml``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+
+from manip_kin import __version__
+from manip_kin.recording import metadata as bag_metadata
+from manip_kin.recording.cdr import CdrLayout, header_stamp_ns
+from manip_kin.recording.errors import RecordingError
+from manip_kin.recording.msgdef import (
+    definitions_from_schema,
+    full_definition_text,
+    has_header_first,
+    normalize_type_name,
+    type_hash,
+)
+from manip_kin.recording.qos import OfferedProfiles, default_offer
+
+MCAP_PROFILE = "ros2"
+SCHEMA_ENCODING = "ros2msg"
+MESSAGE_ENCODING = "cdr"
+DEFAULT_CHUNK_SIZE = 256 * 1024  # bytes; small enough that each chunk is flushed often
+DEFAULT_FLUSH_INTERVAL_S = 0.5  # SIGKILL loses at most about this much (plus one write)
+
+_COMPRESSIONS = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+COMPRESSION_CHOICES = tuple(_COMPRESSIONS)
+
+
+@dataclass(frozen=True)
+class OutputLayout:
+    """Where a recording goes.
+
+    Attributes:
+        mcap_path: the MCAP file written.
+        bag_directory: the bag directory, or None for a single ``.mcap`` file.
+    """
+
+    mcap_path: Path
+    bag_directory: Path | None
+
+
+def resolve_output(output: str | Path, overwrite: bool = True) -> OutputLayout:
+    """Turn an ``output`` argument into file paths (and create parent directories).
+
+    Args:
+        output: ``something.mcap`` for a single file, anything else for a bag directory.
+        overwrite: replace an existing ``.mcap`` file; a non-empty bag directory is
+            never reused (as rosbag2 refuses it), since it may hold another recording.
+
+    Raises:
+        RecordingError: when the path cannot be used.
+    """
+    path = Path(output).expanduser()
+    if path.suffix == ".mcap":
+        if path.is_dir():
+            raise RecordingError(f"output {str(path)!r} is a directory; a .mcap output must be a file")
+        if path.exists() and not overwrite:
+            raise RecordingError(f"output {str(path)!r} exists; choose another path or delete it")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return OutputLayout(path, None)
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        raise RecordingError(
+            f"output {str(path)!r} exists and is not an empty directory; give a new bag "
+            "directory name or a path ending in .mcap"
+        )
+    path.mkdir(parents=True, exist_ok=True)
+    return OutputLayout(path / f"{path.name}_0.mcap", path)
+
+
+def type_name_of(message_class: type) -> str:
+    """``pkg/msg/Type`` of a generated rclpy message class."""
+    package = message_class.__module__.split(".")[0]
+    return f"{package}/msg/{message_class.__name__}"
+
+
+@dataclass
+class _Topic:
+    name: str
+    type: str
+    channel_id: int
+    offered: OfferedProfiles
+    type_hash: str
+    header_first: bool
+    message_count: int = 0
+    sequence: int = 0
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a closed recording holds.
+
+    Attributes:
+        path: the bag directory, or the ``.mcap`` file.
+        mcap_path: the MCAP file.
+        topic_counts: messages per topic (topics without messages included).
+        message_count: all messages.
+        message_bytes: CDR bytes of all messages (before compression).
+        file_bytes: size of the MCAP file.
+        start_ns, end_ns: first and last receive time, ns since the epoch (0 when empty).
+    """
+
+    path: Path
+    mcap_path: Path
+    topic_counts: dict[str, int]
+    message_count: int
+    message_bytes: int
+    file_bytes: int
+    start_ns: int
+    end_ns: int
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds between the first and last message."""
+        return (self.end_ns - self.start_ns) / 1e9 if self.message_count else 0.0
+
+    def one_line(self) -> str:
+        """``recorded 3 topics, 1200 messages, 56.1 KiB in 1.20 s to runs/x.mcap``."""
+        return (
+            f"recorded {len(self.topic_counts)} topics, {self.message_count} messages, "
+            f"{format_bytes(self.file_bytes)} in {self.duration_s:.2f} s to {self.path}"
+        )
+
+
+def format_bytes(size: int) -> str:
+    """Human size with binary units (``1.5 MiB``)."""
+    value = float(size)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if value < 1024 or unit == "GiB":
+            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{size} B"
+
+
+class RecordingWriter:
+    """A rosbag2-compatible MCAP writer. Not thread-safe: call it from one thread.
+
+    Args:
+        output: ``.mcap`` file path, or a bag directory path (see :func:`resolve_output`).
+        compression: chunk compression, one of ``zstd`` (default), ``lz4``, ``none``.
+        chunk_size: uncompressed bytes after which a chunk is finished.
+        flush_interval_s: a chunk is also finished and flushed to the OS when
+            this many seconds passed since the last flush (checked on each write
+            and by :meth:`flush_if_due`).
+        overwrite: replace an existing ``.mcap`` file.
+
+    Raises:
+        RecordingError: on an unknown compression or an unusable output path.
+    """
+
+    def __init__(
+        self,
+        output: str | Path,
+        *,
+        compression: str = "zstd",
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+        flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S,
+        overwrite: bool = True,
+    ):
+        if compression not in _COMPRESSIONS:
+            raise RecordingError(
+                f"compression {compression!r} is not supported; valid: {', '.join(COMPRESSION_CHOICES)}"
+            )
+        if chunk_size <= 0 or flush_interval_s <= 0:
+            raise RecordingError(
+                f"chunk_size ({chunk_size}) and flush_interval_s ({flush_interval_s}) must be positive"
+            )
+        self.layout = resolve_output(output, overwrite=overwrite)
+        self.compression = compression
+        self._flush_interval_s = flush_interval_s
+        self._file = open(self.layout.mcap_path, "wb")  # noqa: SIM115 - closed in close()
+        self._mcap = McapWriter(
+            self._file,
+            chunk_size=chunk_size,
+            compression=_COMPRESSIONS[compression],
+        )
+        self._mcap.start(profile=MCAP_PROFILE, library=f"manip_kin {__version__}; mcap-python")
+        self._file.flush()
+        self._schemas: dict[str, int] = {}
+        self._definitions: dict[str, Any] = {}
+        self._layouts: dict[str, CdrLayout] = {}
+        self._topics: dict[str, _Topic] = {}
+        self._message_bytes = 0
+        self._start_ns = 0
+        self._end_ns = 0
+        self._message_count = 0
+        self._pending = False
+        self._last_flush = time.monotonic()
+        self._summary: RecordingSummary | None = None
+
+    # -- topics -----------------------------------------------------------------------------
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """``{topic: pkg/msg/Type}`` registered so far."""
+        return {name: topic.type for name, topic in self._topics.items()}
+
+    def has_topic(self, topic: str) -> bool:
+        """True when ``topic`` was registered."""
+        return topic in self._topics
+
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        *,
+        offered_qos_profiles: OfferedProfiles | None = None,
+        type_description_hash: str | None = None,
+        schema: tuple[str, str] | None = None,
+    ) -> None:
+        """Register a topic (a channel, and its type's schema once).
+
+        Args:
+            topic: topic name.
+            type_name: ``pkg/msg/Type``.
+            offered_qos_profiles: QoS of the publishers it is recorded from;
+                default: one reliable, volatile, keep-last-10 profile.
+            type_description_hash: ``RIHS01_...``; default: the installed type's.
+            schema: ``(encoding, text)``; default: ``ros2msg`` text from the
+                installed ``.msg`` files, as rosbag2 builds it.
+
+        Raises:
+            RecordingError: when the topic was registered with another type.
+            MessageDefinitionError: when the type's definition cannot be found.
+        """
+        type_name = normalize_type_name(type_name)
+        existing = self._topics.get(topic)
+        if existing is not None:
+            if existing.type != type_name:
+                raise RecordingError(
+                    f"topic {topic!r} is recorded as {existing.type}; cannot also record {type_name}"
+                )
+            return
+        if type_name not in self._schemas:
+            encoding, text = schema or (SCHEMA_ENCODING, full_definition_text(type_name))
+            self._schemas[type_name] = self._mcap.register_schema(
+                name=type_name, encoding=encoding, data=text.encode("utf-8")
+            )
+            if encoding == SCHEMA_ENCODING:
+                self._definitions[type_name] = definitions_from_schema(type_name, text)
+        offered = offered_qos_profiles if offered_qos_profiles is not None else default_offer()
+        hash_text = type_description_hash if type_description_hash is not None else type_hash(type_name)
+        channel_id = self._mcap.register_channel(
+            topic=topic,
+            message_encoding=MESSAGE_ENCODING,
+            schema_id=self._schemas[type_name],
+            metadata={"offered_qos_profiles": offered.to_yaml(), "topic_type_hash": hash_text},
+        )
+        definitions = self._definitions.get(type_name)
+        self._topics[topic] = _Topic(
+            name=topic,
+            type=type_name,
+            channel_id=channel_id,
+            offered=offered,
+            type_hash=hash_text,
+            header_first=bool(definitions) and has_header_first(type_name, definitions),
+        )
+
+    # -- messages ---------------------------------------------------------------------------
+
+    def write_raw(
+        self,
+        topic: str,
+        data: bytes,
+        log_time_ns: int,
+        publish_time_ns: int | None = None,
+        source_time_ns: int | None = None,
+    ) -> None:
+        """Append one serialized (CDR) message.
+
+        Args:
+            topic: a registered topic.
+            data: the CDR bytes, encapsulation header included, exact length.
+            log_time_ns: receive time, ns since the epoch.
+            publish_time_ns: ns since the epoch; default: the message's header
+                stamp when its type starts with a Header and the stamp is set,
+                else ``source_time_ns``, else ``log_time_ns``.
+            source_time_ns: when the publisher sent it (DDS source timestamp),
+                ns since the epoch, if known.
+
+        Raises:
+            RecordingError: for an unregistered topic or a closed writer.
+        """
+        entry = self._topics.get(topic)
+        if entry is None:
+            raise RecordingError(
+                f"topic {topic!r} is not registered; registered: {', '.join(self._topics) or 'none'}"
+            )
+        if self._summary is not None:
+            raise RecordingError(f"recording {self.layout.mcap_path} is closed")
+        if publish_time_ns is None:
+            stamp = header_stamp_ns(data) if entry.header_first else None
+            if stamp is not None:
+                publish_time_ns = stamp
+            else:
+                publish_time_ns = source_time_ns if source_time_ns else log_time_ns
+        entry.sequence += 1
+        self._mcap.add_message(
+            channel_id=entry.channel_id,
+            log_time=log_time_ns,
+            data=data,
+            publish_time=publish_time_ns,
+            sequence=entry.sequence,
+        )
+        entry.message_count += 1
+        if self._message_count == 0:
+            self._start_ns = self._end_ns = log_time_ns
+        else:
+            self._start_ns = min(self._start_ns, log_time_ns)
+            self._end_ns = max(self._end_ns, log_time_ns)
+        self._message_count += 1
+        self._message_bytes += len(data)
+        self._pending = True
+        self.flush_if_due()
+
+    def write(
+        self,
+        topic: str,
+        message: Any,
+        log_time_ns: int | None = None,
+        publish_time_ns: int | None = None,
+    ) -> None:
+        """Serialize an rclpy message and append it (registering the topic on first use).
+
+        The CDR from ``serialize_message`` is trimmed to its real length (see :mod:`.cdr`).
+
+        Args:
+            topic: topic name.
+            message: an rclpy message instance.
+            log_time_ns: receive time, ns since the epoch; default now.
+            publish_time_ns: as in :meth:`write_raw`.
+        """
+        from rclpy.serialization import serialize_message
+
+        if topic not in self._topics:
+            self.add_topic(topic, type_name_of(type(message)))
+        type_name = self._topics[topic].type
+        data = serialize_message(message)
+        layout = self._layouts.get(type_name)
+        if layout is None and type_name in self._definitions:
+            layout = self._layouts[type_name] = CdrLayout(self._definitions[type_name])
+        if layout is not None:
+            data = data[: layout.message_length(type_name, data)]
+        self.write_raw(
+            topic,
+            data,
+            time.time_ns() if log_time_ns is None else log_time_ns,
+            publish_time_ns,
+        )
+
+    # -- durability -------------------------------------------------------------------------
+
+    def flush(self) -> None:
+        """Finish the current chunk and hand everything written so far to the OS."""
+        if self._summary is None:
+            self._mcap.flush()
+            self._pending = False
+            self._last_flush = time.monotonic()
+
+    def flush_if_due(self) -> None:
+        """:meth:`flush` when messages are pending and the flush interval has passed."""
+        if self._pending and time.monotonic() - self._last_flush >= self._flush_interval_s:
+            self.flush()
+
+    # -- end --------------------------------------------------------------------------------
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far."""
+        return self._message_count
+
+    def topic_summaries(self) -> list[bag_metadata.TopicSummary]:
+        """Per-topic metadata, in registration order."""
+        return [
+            bag_metadata.TopicSummary(
+                name=t.name,
+                type=t.type,
+                message_count=t.message_count,
+                offered_qos_profiles=t.offered,
+                type_hash=t.type_hash,
+            )
+            for t in self._topics.values()
+        ]
+
+    def close(self) -> RecordingSummary:
+        """Finish the file (rosbag2 metadata record, summary, footer) and ``metadata.yaml``.
+
+        Calling it again returns the same summary.
+        """
+        if self._summary is not None:
+            return self._summary
+        relative_path = self.layout.mcap_path.name
+        metadata = bag_metadata.bag_metadata(
+            self.topic_summaries(),
+            [relative_path],
+            self._start_ns,
+            self._end_ns - self._start_ns,
+        )
+        self._mcap.flush()
+        self._mcap.add_metadata(
+            bag_metadata.MCAP_METADATA_NAME,
+            {bag_metadata.MCAP_METADATA_KEY: bag_metadata.serialized_metadata(metadata)},
+        )
+        self._mcap.finish()
+        self._file.close()
+        if self.layout.bag_directory is not None:
+            (self.layout.bag_directory / bag_metadata.METADATA_FILENAME).write_text(
+                bag_metadata.metadata_yaml(metadata), encoding="utf-8"
+            )
+        self._summary = RecordingSummary(
+            path=self.layout.bag_directory or self.layout.mcap_path,
+            mcap_path=self.layout.mcap_path,
+            topic_counts={t.name: t.message_count for t in self._topics.values()},
+            message_count=self._message_count,
+            message_bytes=self._message_bytes,
+            file_bytes=self.layout.mcap_path.stat().st_size,
+            start_ns=self._start_ns,
+            end_ns=self._end_ns,
+        )
+        return self._summary
+
+    def __enter__(self) -> "RecordingWriter":
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
