@@ -1,0 +1,463 @@
+"""The resolved-rate cartesian control law run every cycle by ``cartesian_controller``.
+
+One step, from the joint positions ``q`` and a goal pose (plus an optional goal twist):
+
+1. Cartesian error of the controlled frame (tool if any, else the end effector):
+   orientation ``e_o`` = angle-axis of ``frame_R_goal`` expressed in base (equivalently the
+   rotation vector of ``R_goal · Rᵀ``) [rad], position ``e_p = p_goal - p`` in base [m].
+2. Reference twist ``v* = [K_o e_o + ω_ff; K_p e_p + v_ff]`` (separate gains, optional
+   feed-forward). With ``ω = K_o e_o`` about the fixed axis of ``e_o``, the error decays as
+   ``exp(-K t)``.
+3. Joint rates ``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ v*`` over the task rows of the geometric Jacobian
+   ``J``. The damping is zero while the smallest singular value ``σ_min`` of ``J`` is above
+   ``ε = singular_threshold`` and rises smoothly below it (Chiaverini's rule),
+   ``λ² = λ_max² (1 - (σ_min / ε)²)``: exact tracking away from singularities, bounded rates
+   at them, and motion in every non-singular direction so the arm never stops at one.
+4. Position limits (SNS-style, after Flacco et al.): a joint whose rate would carry it past a
+   limit within the control period ``dt`` is saturated at the rate that lands it exactly on
+   the limit (zero once it is there), its column is removed from ``J`` and the task minus
+   its contribution is re-solved over the remaining joints; repeat until no joint violates.
+   The task is thus redistributed instead of being distorted by a clamp.
+5. Velocity limits: the whole ``q̇`` is scaled by one factor so every joint is within its
+   limit; the direction of motion (and of the cartesian velocity) is kept.
+
+The hot path runs on plain floats: the model's unrolled kinematics
+(:func:`manip_kin.kinematics.compiled_kinematics`) and an unrolled damped solve
+(:func:`manip_kin.unrolled_linalg.damped_solver`); numpy only builds the output arrays.
+Near a singularity (ruled out cheaply by ``det`` and ``tr`` of ``J Jᵀ``, see
+:func:`manip_kin.unrolled_linalg.smallest_eigenvalue_bound`) ``σ_min`` is computed exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from manip_kin.errors import InvalidArgumentError, JointCountError, NonFiniteError
+from manip_kin.kinematics import compiled_kinematics
+from manip_kin.model import RobotModel
+from manip_kin.fast_step import compile_step
+from manip_kin.rotations import matrix_to_rotvec
+from manip_kin.tasks import Task, parse_task
+from manip_kin.unrolled_linalg import cholesky_solver, damped_solver, smallest_eigenvalue_bound
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Parameters of :class:`CartesianController`.
+
+    Attributes:
+        gain_angular: orientation gain K_o [1/s], >= 0.
+        gain_linear: position gain K_p [1/s], >= 0.
+        frame: controlled frame (``tool``, ``ee``, a joint frame number or link name);
+            None = the tool if the robot has one, else the end effector.
+        task: which error components are controlled (see :mod:`manip_kin.tasks`): a name
+            (``full``, ``position``, ``position_yaw``, ``orientation``), a comma list such as
+            ``"rz,x,y,z"`` or a six-value 0/1 mask over ``[rx, ry, rz, x, y, z]``;
+            None = :func:`manip_kin.tasks.default_task` (full for six or more joints).
+        damping_max: λ_max, the damping at an exact singularity [same unit as J's singular
+            values: m/rad for the linear rows, 1 for the angular rows], >= 0.
+        singular_threshold: ε, the smallest singular value of the task Jacobian below which
+            damping rises, > 0.
+        respect_velocity_limits: scale q̇ so every joint stays within its velocity limit.
+        respect_position_limits: keep ``q + q̇·dt`` within the position limits by
+            redistributing the task over the joints not at a limit.
+    """
+
+    gain_angular: float = 0.8
+    gain_linear: float = 0.8
+    frame: str | None = None
+    task: str | Sequence[int] | Task | None = None
+    damping_max: float = 0.04
+    singular_threshold: float = 0.02
+    respect_velocity_limits: bool = True
+    respect_position_limits: bool = True
+
+    def __post_init__(self):
+        for name in ("gain_angular", "gain_linear", "damping_max"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise InvalidArgumentError(f"{name} = {value!r}; valid: a finite number >= 0")
+        threshold = self.singular_threshold
+        if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0.0):
+            raise InvalidArgumentError(f"singular_threshold = {threshold!r}; valid: a finite number > 0")
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """Result of one :meth:`CartesianController.step`.
+
+    Attributes:
+        qdot: joint rates to command, shape (n,) [rad/s | m/s].
+        orientation_error: rotation vector of ``frame_R_goal`` expressed in base, shape (3,) [rad].
+        position_error: ``p_goal - p`` in base, shape (3,) [m].
+        manipulability: Yoshikawa's ``sqrt(det(J Jᵀ))`` of the task Jacobian.
+        damping: λ used in the damped pseudo-inverse (0 away from singularities).
+        velocity_scale: factor applied to q̇ for the velocity limits (1.0 = not saturated).
+        limited_joints: indices of joints held at (or stopped exactly on) a position limit.
+        singular: True when the task Jacobian's σ_min is below the singular threshold.
+    """
+
+    qdot: np.ndarray
+    orientation_error: np.ndarray
+    position_error: np.ndarray
+    manipulability: float
+    damping: float
+    velocity_scale: float
+    limited_joints: tuple[int, ...]
+    singular: bool
+
+    @property
+    def orientation_error_norm(self) -> float:
+        """Rotation angle between the frame and the goal [rad]."""
+        return float(math.sqrt(float(self.orientation_error @ self.orientation_error)))
+
+    @property
+    def position_error_norm(self) -> float:
+        """Distance between the frame origin and the goal position [m]."""
+        return float(math.sqrt(float(self.position_error @ self.position_error)))
+
+
+def _rotvec_of(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float]:
+    """Rotation vector of a rotation matrix given by its entries (same math as
+    :func:`manip_kin.rotations.matrix_to_rotvec`: Shepperd's quaternion, then
+    ``2 atan2(|v|, w) v / |v|``, exact near 0 and π)."""
+    trace = m00 + m11 + m22
+    if trace >= m00 and trace >= m11 and trace >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
+        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
+    elif m00 >= m11 and m00 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
+        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
+    elif m11 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
+        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
+    else:
+        s = 2.0 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
+        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
+    if w < 0.0:  # the quaternion with w >= 0 gives the angle in [0, π]
+        x, y, z, w = -x, -y, -z, -w
+    vector_norm = math.sqrt(x * x + y * y + z * z)
+    # The quaternion need not be normalised: both branches are scale-invariant.
+    if vector_norm < 1e-8 * abs(w):
+        scale = 2.0 / w
+    else:
+        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
+    return x * scale, y * scale, z * scale
+
+
+def _pose_error_values(pose: Sequence[float], goal: Sequence[Sequence[float]]) -> tuple[float, ...]:
+    """``(e_o, e_p)`` as six floats from a flat row-major 4x4 ``pose`` (>= 12 values) and goal rows."""
+    r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = pose[:12]
+    (g00, g01, g02, gx), (g10, g11, g12, gy), (g20, g21, g22, gz) = goal[0], goal[1], goal[2]
+    # E = R_goal · Rᵀ: E_ij = goal row i · current row j.
+    rx, ry, rz = _rotvec_of(
+        g00 * r00 + g01 * r01 + g02 * r02,
+        g00 * r10 + g01 * r11 + g02 * r12,
+        g00 * r20 + g01 * r21 + g02 * r22,
+        g10 * r00 + g11 * r01 + g12 * r02,
+        g10 * r10 + g11 * r11 + g12 * r12,
+        g10 * r20 + g11 * r21 + g12 * r22,
+        g20 * r00 + g21 * r01 + g22 * r02,
+        g20 * r10 + g21 * r11 + g22 * r12,
+        g20 * r20 + g21 * r21 + g22 * r22,
+    )
+    return rx, ry, rz, gx - px, gy - py, gz - pz
+
+
+def pose_error(current_pose: np.ndarray, goal_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cartesian error between a frame and its goal, both 4x4 poses in base.
+
+    Returns:
+        ``(orientation_error, position_error)``: the angle-axis of ``current_R_goal``
+        expressed in base (= rotation vector of ``R_goal Rᵀ``), shape (3,) [rad], and
+        ``goal - current`` position in base, shape (3,) [m].
+    """
+    current = np.asarray(current_pose, dtype=float)
+    goal = np.asarray(goal_pose, dtype=float)
+    if current.shape != (4, 4) or goal.shape != (4, 4):
+        raise InvalidArgumentError(f"poses have shapes {current.shape} and {goal.shape}; valid: (4, 4) each")
+    orientation = matrix_to_rotvec(goal[:3, :3] @ current[:3, :3].T)
+    return orientation, goal[:3, 3] - current[:3, 3]
+
+
+_NO_FEED_FORWARD = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_INFINITY = math.inf
+
+
+def _feed_forward_values(goal_twist) -> list[float]:
+    """``(angular, linear)`` as six floats ``[ω; v]``, validated."""
+    try:
+        angular, linear = goal_twist
+        values = [float(v) for v in angular] + [float(v) for v in linear]
+    except (TypeError, ValueError):
+        values = []
+    if len(values) != 6:
+        raise InvalidArgumentError(
+            f"goal_twist = {goal_twist!r}; valid: (angular, linear) with 3 values each [rad/s], [m/s]"
+        )
+    if not math.isfinite(sum(values)):
+        raise NonFiniteError("goal_twist")
+    return values
+
+
+def _output(qdot, error, manipulability, damping, scale, limited, singular) -> ControlOutput:
+    errors = np.array(error)
+    # A frozen dataclass's __init__ sets each field through object.__setattr__; filling
+    # __dict__ at once builds the same object for a fraction of the cost (hot path).
+    output = object.__new__(ControlOutput)
+    output.__dict__.update(
+        qdot=np.array(qdot),
+        orientation_error=errors[:3],
+        position_error=errors[3:],
+        manipulability=manipulability,
+        damping=damping,
+        velocity_scale=scale,
+        limited_joints=limited,
+        singular=singular,
+    )
+    return output
+
+
+def _goal_rows(goal_pose) -> list[list[float]]:
+    """The goal pose as 4 rows of 4 floats, validated cheaply."""
+    try:
+        rows = goal_pose.tolist() if isinstance(goal_pose, np.ndarray) else [list(map(float, r)) for r in goal_pose]
+        ok = len(rows) == 4 and all(len(r) == 4 for r in rows)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        shape = getattr(goal_pose, "shape", None)
+        raise InvalidArgumentError(f"goal_pose has shape {shape}; valid: a 4x4 homogeneous transform")
+    return rows
+
+
+class CartesianController:
+    """Resolved-rate control of one frame towards a goal pose (see the module docstring).
+
+    Not thread-safe: it keeps preallocated buffers. Create one per control loop.
+
+    Attributes:
+        model: the robot.
+        config: the parameters.
+        frame_index: the controlled frame (see :meth:`RobotModel.frame_index`).
+        task: the controlled error components.
+    """
+
+    def __init__(self, model: RobotModel, config: ControllerConfig = ControllerConfig()):
+        self.model = model
+        self.config = config
+        self.frame_index = model.frame_index(config.frame if config.frame is not None else model.default_frame)
+        self.task = parse_task(config.task, model)
+        n = model.dof
+        rows = self.task.rows
+        self._n = n
+        self._rows = rows
+        self._chain = compiled_kinematics(model, self.frame_index, True)
+        self._fast_solve = damped_solver(self._chain, n, rows)
+        self._fused_step = compile_step(
+            self._chain,
+            n,
+            rows,
+            ControlOutput,
+            gain_angular=float(config.gain_angular),
+            gain_linear=float(config.gain_linear),
+            epsilon_sq=config.singular_threshold**2,
+            lower=model.lower.tolist() if config.respect_position_limits else None,
+            upper=model.upper.tolist() if config.respect_position_limits else None,
+            inverse_velocity_limits=(1.0 / model.velocity_limits).tolist() if config.respect_velocity_limits else None,
+        )
+        self._solve = cholesky_solver(len(rows))
+        self._gain_angular = float(config.gain_angular)
+        self._gain_linear = float(config.gain_linear)
+        self._respect_position_limits = bool(config.respect_position_limits)
+        self._respect_velocity_limits = bool(config.respect_velocity_limits)
+        self._lower = model.lower.tolist()
+        self._upper = model.upper.tolist()
+        self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
+        self._epsilon_sq = config.singular_threshold**2
+        self._damping_max_sq = config.damping_max**2
+
+    # --- the damped least-squares solve ---------------------------------------------------
+
+    def _task_jacobian(self, values: Sequence[float]) -> np.ndarray:
+        """The task rows of the Jacobian in a chain output, shape (m, n)."""
+        return np.array(values[16:]).reshape(6, self._n)[list(self._rows)]
+
+    def _damping_for(self, gram: np.ndarray) -> tuple[float, float, float]:
+        """``(σ_min, λ², manipulability)`` of a Gram matrix ``J Jᵀ``, from its eigenvalues."""
+        if not np.all(np.isfinite(gram)):
+            raise NonFiniteError("the Jacobian (q or the model)")
+        eigenvalues = np.linalg.eigvalsh(gram)
+        sigma_min = math.sqrt(max(float(eigenvalues[0]), 0.0))
+        manipulability = math.sqrt(float(np.prod(np.maximum(eigenvalues, 0.0))))
+        damping_sq = self._damping_max_sq * max(0.0, 1.0 - sigma_min * sigma_min / self._epsilon_sq)
+        return sigma_min, damping_sq, manipulability
+
+    def _solve_near_singular(self, values: Sequence[float], rhs: list, undamped) -> tuple[list, float, bool, float]:
+        """The fast path could not certify σ_min >= ε: decide the damping from the exact σ_min."""
+        jacobian = self._task_jacobian(values)
+        sigma_min, damping_sq, manipulability = self._damping_for(jacobian @ jacobian.T)
+        if sigma_min >= self.config.singular_threshold and undamped is not None:
+            return undamped[0], 0.0, False, manipulability
+        damped = self._fast_solve(values, rhs, damping_sq) if damping_sq > 0.0 else None
+        if damped is not None:
+            return damped[0], math.sqrt(damping_sq), True, manipulability
+        return self._least_squares(jacobian, rhs), math.sqrt(damping_sq), True, manipulability
+
+    @staticmethod
+    def _least_squares(jacobian: np.ndarray, rhs) -> list:
+        # No damping configured at an exact singularity: the minimum-norm least-squares rates.
+        return np.linalg.lstsq(jacobian, np.asarray(rhs, dtype=float), rcond=1e-12)[0].tolist()
+
+    def _solve_reduced(self, jacobian: np.ndarray, rhs: list) -> tuple[list, float, bool]:
+        """Damped ``Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` for a reduced Jacobian (some columns removed)."""
+        gram = jacobian @ jacobian.T
+        gram_rows = gram.tolist()
+        result = self._solve(gram_rows, rhs, 0.0)
+        if result is not None and smallest_eigenvalue_bound(result[1], result[2], len(rhs)) >= self._epsilon_sq:
+            return np.dot(result[0], jacobian).tolist(), 0.0, False
+        sigma_min, damping_sq, _ = self._damping_for(gram)
+        if sigma_min >= self.config.singular_threshold and result is not None:
+            return np.dot(result[0], jacobian).tolist(), 0.0, False
+        damped = self._solve(gram_rows, rhs, damping_sq) if damping_sq > 0.0 else None
+        if damped is not None:
+            return np.dot(damped[0], jacobian).tolist(), math.sqrt(damping_sq), True
+        return self._least_squares(jacobian, rhs), math.sqrt(damping_sq), True
+
+    # --- the control step -----------------------------------------------------------------
+
+    def step(
+        self,
+        q: np.ndarray,
+        goal_pose: np.ndarray,
+        goal_twist: tuple[np.ndarray, np.ndarray] | None = None,
+        dt: float = 0.002,
+    ) -> ControlOutput:
+        """Joint rates that move the controlled frame towards ``goal_pose``.
+
+        Args:
+            q: joint positions, shape (n,) [rad | m].
+            goal_pose: goal pose of the controlled frame in base, shape (4, 4). Its rotation is
+                not re-validated every cycle: check it where it enters (see
+                :func:`manip_kin.rotations.check_rotation`).
+            goal_twist: optional feed-forward ``(angular [rad/s], linear [m/s])`` of the goal,
+                w.r.t. base, in base, shapes (3,) and (3,).
+            dt: control period [s], > 0: the horizon over which ``q + q̇·dt`` must stay within
+                the position limits.
+        """
+        q_values = q.tolist() if type(q) is np.ndarray else [float(v) for v in q]
+        if len(q_values) != self._n:
+            raise JointCountError("q", len(q_values), self._n)
+        if not 0.0 < dt < _INFINITY:
+            raise InvalidArgumentError(f"dt = {dt!r}; valid: a finite period > 0 [s]")
+        if type(goal_pose) is np.ndarray and goal_pose.shape == (4, 4):
+            goal = goal_pose.tolist()
+        else:
+            goal = _goal_rows(goal_pose)
+        feed_forward = _NO_FEED_FORWARD if goal_twist is None else _feed_forward_values(goal_twist)
+        fused_step = self._fused_step
+        if fused_step is not None:
+            try:
+                output = fused_step(q_values, goal, feed_forward, dt)
+            except (ArithmeticError, ValueError):
+                output = None  # e.g. an infinite q or a goal "rotation" that is not one
+            if output is not None:
+                return output
+        return self._step_general(q_values, goal, feed_forward, dt)
+
+    def _step_general(self, q_values: list, goal: list, feed_forward: Sequence[float], dt: float) -> ControlOutput:
+        """Every case of the control law: damping near singularities, position limits, scaling."""
+        if not math.isfinite(sum(q_values)):
+            raise NonFiniteError("q")
+        values = self._chain(q_values)
+        try:
+            error = _pose_error_values(values, goal)
+        except ZeroDivisionError:
+            raise InvalidArgumentError(
+                "goal_pose rotation is not a rotation matrix; valid: orthonormal with det +1"
+            ) from None
+        gains = (self._gain_angular,) * 3 + (self._gain_linear,) * 3
+        reference = [gains[i] * error[i] + feed_forward[i] for i in range(6)]
+        rhs = [reference[r] for r in self._rows]
+        if not math.isfinite(sum(rhs)):
+            raise NonFiniteError("the goal pose or the goal twist")
+
+        result = self._fast_solve(values, rhs, 0.0)
+        # σ_min² = λ_min(JJᵀ) >= det · ((m-1)/tr)^(m-1): when that clears ε², no damping is due.
+        if result is not None and smallest_eigenvalue_bound(result[1], result[2], len(rhs)) >= self._epsilon_sq:
+            qdot, damping, singular, manipulability = result[0], 0.0, False, math.sqrt(result[1])
+        else:
+            qdot, damping, singular, manipulability = self._solve_near_singular(values, rhs, result)
+
+        limited: tuple[int, ...] = ()
+        if self._respect_position_limits:
+            for rate, position, low, high in zip(qdot, q_values, self._lower, self._upper):
+                if (position + rate * dt < low) if rate < 0.0 else (position + rate * dt > high):
+                    qdot, limited, damping, singular = self._redistribute(
+                        q_values, values, rhs, qdot, dt, damping, singular
+                    )
+                    break
+
+        scale = 1.0
+        if self._respect_velocity_limits:
+            worst = max([abs(rate) * inverse for rate, inverse in zip(qdot, self._inverse_velocity_limits)])
+            if worst > 1.0:
+                scale = 1.0 / worst
+                qdot = [rate * scale for rate in qdot]
+        return _output(qdot, error, manipulability, damping, scale, limited, singular)
+
+    def _redistribute(
+        self, q_values: list, values: Sequence[float], rhs: list, qdot: list, dt: float, damping: float, singular: bool
+    ) -> tuple[list, tuple[int, ...], float, bool]:
+        """SNS-style position-limit handling (the rare path: some joint would cross a limit).
+
+        Repeatedly saturates the joint that violates its bound the most (relative to its
+        velocity limit) at the rate that lands it on the limit, removes its column and
+        re-solves the remaining task over the other joints.
+        """
+        n = self._n
+        lower, upper = self._lower, self._upper
+        inverse_limits = self._inverse_velocity_limits
+        jacobian = self._task_jacobian(values)
+        residual = np.array(rhs, dtype=float)
+        free = np.ones(n, dtype=bool)
+        saturated: list[int] = []
+        qdot = list(qdot)
+        for _ in range(n):
+            worst_joint, worst_excess, worst_rate = -1, 0.0, 0.0
+            for j in range(n):
+                if not free[j]:
+                    continue
+                rate = qdot[j]
+                # The rate that lands exactly on the limit; 0 for a joint already at or past it.
+                if rate < 0.0 and q_values[j] + rate * dt < lower[j]:
+                    bound = min((lower[j] - q_values[j]) / dt, 0.0)
+                elif rate > 0.0 and q_values[j] + rate * dt > upper[j]:
+                    bound = max((upper[j] - q_values[j]) / dt, 0.0)
+                else:
+                    continue
+                excess = abs(rate - bound) * inverse_limits[j]
+                if excess > worst_excess or worst_joint < 0:
+                    worst_joint, worst_excess, worst_rate = j, excess, bound
+            if worst_joint < 0:
+                break
+            free[worst_joint] = False
+            saturated.append(worst_joint)
+            qdot[worst_joint] = worst_rate
+            residual -= jacobian[:, worst_joint] * worst_rate
+            if not free.any():
+                break
+            solved, damping, singular = self._solve_reduced(jacobian[:, free], residual.tolist())
+            for value, j in zip(solved, np.flatnonzero(free)):
+                qdot[j] = value
+        return qdot, tuple(sorted(saturated)), damping, singular
+
+    def error(self, q: np.ndarray, goal_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(orientation_error [rad], position_error [m])`` of the controlled frame at ``q``, shapes (3,)."""
+        q_values = self.model.check_q(q).tolist()
+        error = _pose_error_values(self._chain(q_values), _goal_rows(goal_pose))
+        return np.array(error[:3]), np.array(error[3:])

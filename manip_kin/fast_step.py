@@ -1,0 +1,228 @@
+"""The common case of one control step as a single generated Python function.
+
+:class:`manip_kin.control.CartesianController` runs every cycle. Away from singularities
+and position limits a step is: forward kinematics and Jacobian, the pose error, the
+reference twist, ``J Jᵀ``, a Cholesky solve, ``Jᵀ x``, a limit check and the velocity
+scaling — about a thousand float operations. Separate functions (and numpy calls) for
+each of those cost more in call overhead and tuple packing than in arithmetic, so this
+module generates one function doing all of it on local variables, with the model and the
+controller's constants (gains, limits, thresholds, constant Jacobian entries) folded in.
+
+The generated function handles the common case only and returns None whenever anything
+else is needed — a possible singularity (the cheap eigenvalue bound does not clear ε²), a
+joint that would cross a position limit, a non-finite value — and the controller then
+runs its general path (:meth:`CartesianController._step_general`), which is also the
+reference the tests compare this one with.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from manip_kin.unrolled_linalg import (
+    _determinant_and_trace,
+    chain_constants,
+    damped_solve_lines,
+    jacobian_entries,
+)
+
+# Locals of the generated step: upper-case names and the solver's (a, b, d, l, p, r, x, y
+# with digits). The chain's own locals (q0.., c0.., s0.., v0.. today) must not be among
+# them: checked on generation.
+_STEP_NAMES = re.compile(r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|p\d+|r\d+|x\d+|y\d+)$")
+_ASSIGNMENT = re.compile(r"^\s*([A-Za-z_][\w\s,]*?)\s*=(?!=)")
+
+_ROTVEC = """\
+    TRC = M00 + M11 + M22
+    if TRC >= M00 and TRC >= M11 and TRC >= M22:
+        SS = 2.0 * sqrt(1.0 + TRC if TRC > -1.0 else 0.0)
+        QX = (M21 - M12) / SS; QY = (M02 - M20) / SS; QZ = (M10 - M01) / SS; QW = 0.25 * SS
+    elif M00 >= M11 and M00 >= M22:
+        SS = 2.0 * sqrt(max(1.0 + M00 - M11 - M22, 0.0))
+        QX = 0.25 * SS; QY = (M01 + M10) / SS; QZ = (M02 + M20) / SS; QW = (M21 - M12) / SS
+    elif M11 >= M22:
+        SS = 2.0 * sqrt(max(1.0 + M11 - M00 - M22, 0.0))
+        QX = (M01 + M10) / SS; QY = 0.25 * SS; QZ = (M12 + M21) / SS; QW = (M02 - M20) / SS
+    else:
+        SS = 2.0 * sqrt(max(1.0 + M22 - M00 - M11, 0.0))
+        QX = (M02 + M20) / SS; QY = (M12 + M21) / SS; QZ = 0.25 * SS; QW = (M10 - M01) / SS
+    if QW < 0.0:
+        QX = -QX; QY = -QY; QZ = -QZ; QW = -QW
+    VN = sqrt(QX * QX + QY * QY + QZ * QZ)
+    if VN < 1e-8 * QW:
+        SC = 2.0 / QW
+    else:
+        SC = 2.0 * atan2(VN, QW) / VN
+    E0 = QX * SC; E1 = QY * SC; E2 = QZ * SC
+"""
+
+
+def _split_chain_source(source: str) -> tuple[list[str], list[str]]:
+    """Body lines and returned expressions of a generated chain ``def chain(q): … return (…,)``."""
+    lines = source.rstrip("\n").split("\n")
+    if not lines[0].startswith("def ") or not lines[-1].strip().startswith("return ("):
+        raise ValueError("unexpected chain source layout")
+    returned = lines[-1].strip()[len("return (") :].rstrip(")").rstrip(",")
+    tokens = [token.strip() for token in returned.split(",")]
+    return lines[1:-1], tokens
+
+
+def _literal(token: str) -> float | None:
+    try:
+        return float(token)
+    except ValueError:
+        return None
+
+
+def _assigned_names(lines: Sequence[str]) -> set[str]:
+    """Names assigned by simple statements ``a = …`` / ``a, b = …`` (``;``-separated too)."""
+    names = set()
+    for line in lines:
+        for statement in line.split(";"):
+            match = _ASSIGNMENT.match(statement)
+            if match:
+                names.update(name.strip() for name in match.group(1).split(",") if name.strip())
+    return names
+
+
+def step_source(
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    gain_angular: float,
+    gain_linear: float,
+    epsilon_sq: float,
+    lower: Sequence[float] | None,
+    upper: Sequence[float] | None,
+    inverse_velocity_limits: Sequence[float] | None,
+) -> str:
+    """Source of ``step(q, g, f, dt)`` for one chain and controller configuration.
+
+    The generated function takes ``q`` (n floats), the goal pose rows ``g`` (at least 3
+    rows of 4 floats), the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and
+    returns a :class:`manip_kin.control.ControlOutput` (the class is given as ``OUTPUT``
+    when compiling) or None (see the module docstring). ``lower``/``upper`` None skip the
+    position-limit check, ``inverse_velocity_limits`` None the velocity scaling.
+    """
+    chain_lines, tokens = _split_chain_source(chain.source)
+    constants = chain_constants(chain, dof)
+    # Output entries the chain writes as literals are constants too.
+    for index, token in enumerate(tokens):
+        value = _literal(token)
+        if value is not None:
+            constants.setdefault(index, value)
+    n, m = dof, len(rows)
+    pose = [constants[k] if k in constants else tokens[k] for k in range(12)]
+    lines = ["def step(q, g, f, dt):"]
+    lines.append(f"    {', '.join(f'Q{j}' for j in range(n))}, = q")
+    lines += chain_lines
+    lines.append("    (G0, G1, G2, GX), (G3, G4, G5, GY), (G6, G7, G8, GZ) = g[0], g[1], g[2]")
+    # E = R_goal · Rᵀ: entry (i, j) = goal row i · current row j.
+    from manip_kin.unrolled_linalg import _product, _sum
+
+    goal = [["G0", "G1", "G2"], ["G3", "G4", "G5"], ["G6", "G7", "G8"]]
+    current = [[pose[0], pose[1], pose[2]], [pose[4], pose[5], pose[6]], [pose[8], pose[9], pose[10]]]
+    for i in range(3):
+        for j in range(3):
+            lines.append(f"    M{i}{j} = " + _sum([_product(goal[i][k], current[j][k]) for k in range(3)]))
+    lines += _ROTVEC.rstrip("\n").split("\n")
+    for axis, (goal_name, index) in enumerate((("GX", 3), ("GY", 7), ("GZ", 11))):
+        lines.append(f"    E{3 + axis} = " + _sum([goal_name, _product(-1.0, pose[index])]))
+    lines.append("    F0, F1, F2, F3, F4, F5 = f")
+    for i, r in enumerate(rows):
+        gain = gain_angular if r < 3 else gain_linear
+        lines.append(f"    b{i} = {gain!r}*E{r} + F{r}")
+    # A NaN or an infinity anywhere in the task makes x - x non-zero (NaN).
+    check = " + ".join(f"b{i}" for i in range(m))
+    lines.append(f"    W = {check}")
+    lines.append("    if W - W != 0.0:")
+    lines.append("        return None")
+    entries = jacobian_entries(n, rows, tokens, constants)
+    body, qdot = damped_solve_lines(entries, m, n, shifted=False)
+    lines += body
+    lines.append(f"    DET, TR = {_determinant_and_trace(m, shifted=False)}")
+    if m > 1:
+        lines.append(f"    if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
+    else:
+        lines.append(f"    if DET < {epsilon_sq!r}:")
+    lines.append("        return None")
+    for j in range(n):
+        lines.append(f"    QD{j} = {qdot[j]}")
+    if lower is not None and upper is not None:
+        # A joint that would end outside its limits after dt needs the general path (which
+        # also lets a joint already outside move back in).
+        inside = [
+            f"{float(lower[j])!r} <= Q{j} + QD{j} * dt <= {float(upper[j])!r}"
+            for j in range(n)
+            if not (math.isinf(lower[j]) and math.isinf(upper[j]))
+        ]
+        if inside:
+            lines.append(f"    if not ({' and '.join(inside)}):")
+            lines.append("        return None")
+    lines.append("    S = 1.0")
+    if inverse_velocity_limits is not None:
+        # Comparisons only in the common case; the scale is computed when some rate exceeds.
+        limits = [1.0 / float(inverse_velocity_limits[j]) for j in range(n)]
+        exceeds = " or ".join(f"QD{j} > {limits[j]!r} or QD{j} < {-limits[j]!r}" for j in range(n))
+        worst = ", ".join(f"abs(QD{j})*{float(inverse_velocity_limits[j])!r}" for j in range(n))
+        lines.append(f"    if {exceeds}:")
+        lines.append(f"        S = 1.0 / max({worst}{', 0.0' if n == 1 else ''})")
+        lines.append(f"        {', '.join(f'QD{j}' for j in range(n))}, = {', '.join(f'QD{j} * S' for j in range(n))},")
+    # The ControlOutput is filled through __dict__ (it is a frozen dataclass; its __init__
+    # would set each field through object.__setattr__, several times slower).
+    lines.append("    OUT = NEW(OUTPUT)")
+    lines.append(
+        f"    OUT.__dict__.update(qdot=array(({', '.join(f'QD{j}' for j in range(n))},)), "
+        "orientation_error=array((E0, E1, E2)), position_error=array((E3, E4, E5)), "
+        "manipulability=sqrt(DET), damping=0.0, velocity_scale=S, limited_joints=(), singular=False)"
+    )
+    lines.append("    return OUT")
+    clashes = sorted(name for name in _assigned_names(chain_lines) if _STEP_NAMES.match(name))
+    if clashes:
+        raise ValueError(f"generated chain uses names the step needs: {clashes}")
+    return "\n".join(lines) + "\n"
+
+
+_CACHE: dict[tuple, tuple[Callable, Callable]] = {}
+
+
+def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: type, **constants) -> Callable | None:
+    """Compile :func:`step_source` (cached); None when the chain cannot be fused (no ``source``).
+
+    Args:
+        chain: the generated chain with its ``source``.
+        dof: number of joints n.
+        rows: task rows.
+        output_class: :class:`manip_kin.control.ControlOutput`.
+        **constants: the remaining arguments of :func:`step_source`.
+    """
+    key = (id(chain), dof, tuple(rows), output_class) + tuple(
+        (name, tuple(value) if isinstance(value, (list, tuple)) else value) for name, value in sorted(constants.items())
+    )
+    cached = _CACHE.get(key)
+    if cached is not None and cached[0] is chain:
+        return cached[1]
+    if not isinstance(getattr(chain, "source", None), str):
+        return None
+    try:
+        source = step_source(chain, dof, rows, **constants)
+    except ValueError:
+        return None
+    namespace: dict = {
+        "sqrt": math.sqrt,
+        "atan2": math.atan2,
+        "cos": math.cos,
+        "sin": math.sin,
+        "array": np.array,
+        "NEW": object.__new__,
+        "OUTPUT": output_class,
+    }
+    exec(compile(source, "<manip_kin control step>", "exec"), namespace)  # noqa: S102 - our own source
+    function = namespace["step"]
+    function.source = source
+    _CACHE[key] = (chain, function)
+    return function

@@ -1,0 +1,232 @@
+"""Unrolled small linear algebra for the control and IK hot paths.
+
+A damped least-squares step ``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ b`` with J of shape (m, n), m <= 6,
+costs a handful of numpy calls (copy J in, ``J Jᵀ``, ``linalg.solve``, ``Jᵀ x``) at about a
+microsecond of overhead each for a few hundred flops. Generated once as straight-line
+float arithmetic reading J directly from the tuple the unrolled kinematics
+(:func:`manip_kin.kinematics.compiled_kinematics`) return, with J's constant entries
+folded in, it costs less and yields for free what the damping rule needs: ``det(JJᵀ)``
+(the manipulability) and, with ``tr(JJᵀ)``, a lower bound of the smallest eigenvalue
+(:func:`smallest_eigenvalue_bound`) that spares the eigen-decomposition away from
+singularities.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+_CHOLESKY_CACHE: dict[int, Callable] = {}
+_DAMPED_CACHE: dict[tuple, tuple[Callable, Callable]] = {}
+
+
+def _cholesky_body(m: int, shifted: bool = True) -> list[str]:
+    """Lines factoring ``a + d I`` (locals ``a{i}_{k}``, k <= i; without the shift ``d`` when
+    not ``shifted``) and solving for ``b{i}`` into ``x{i}``; the pivots (squared diagonal
+    of L) are ``p{j}``."""
+    lines = []
+    shift = " + d" if shifted else ""
+    for j in range(m):
+        lines.append(f"    p{j} = a{j}_{j}{shift}" + "".join(f" - l{j}_{k}*l{j}_{k}" for k in range(j)))
+        # `not p > 0` is also true for NaN: a non-finite input never reaches sqrt.
+        lines.append(f"    if not p{j} > 0.0:")
+        lines.append("        return None")
+        lines.append(f"    r{j} = 1.0 / sqrt(p{j})")
+        for i in range(j + 1, m):
+            lines.append(f"    l{i}_{j} = (a{i}_{j}" + "".join(f" - l{i}_{k}*l{j}_{k}" for k in range(j)) + f") * r{j}")
+    # L y = b, then Lᵀ x = y (the diagonal of L is 1 / r).
+    for i in range(m):
+        lines.append(f"    y{i} = (b{i}" + "".join(f" - l{i}_{k}*y{k}" for k in range(i)) + f") * r{i}")
+    for i in reversed(range(m)):
+        lines.append(f"    x{i} = (y{i}" + "".join(f" - l{k}_{i}*x{k}" for k in range(i + 1, m)) + f") * r{i}")
+    return lines
+
+
+def _determinant_and_trace(m: int, shifted: bool = True) -> str:
+    trace = " + ".join(f"a{j}_{j}" for j in range(m)) + (f" + {m}*d" if shifted else "")
+    return "*".join(f"p{j}" for j in range(m)) + ", " + trace
+
+
+def smallest_eigenvalue_bound(determinant: float, trace: float, size: int) -> float:
+    """A lower bound of the smallest eigenvalue of a symmetric positive semi-definite matrix.
+
+    With eigenvalues λ₁ <= … <= λ_m: ``λ₁ = det / (λ₂ ⋯ λ_m)`` and, by the AM–GM inequality,
+    ``λ₂ ⋯ λ_m <= (tr / (m - 1))^(m-1)``, so ``λ₁ >= det · ((m - 1) / tr)^(m-1)``. It is
+    tight when the other eigenvalues are similar and costs nothing after a Cholesky
+    factorisation; when it does not clear a threshold, compute the eigenvalues.
+    """
+    if size == 1:
+        return determinant
+    if not trace > 0.0:
+        return 0.0
+    return determinant * ((size - 1) / trace) ** (size - 1)
+
+
+def _cholesky_source(m: int) -> str:
+    lines = ["def solve(a, b, d):"]
+    lines.append(f"    {', '.join(f'a{i}' for i in range(m))}, = a")
+    for i in range(m):
+        lines.append(f"    {', '.join(f'a{i}_{j}' for j in range(m))}, = a{i}")
+    lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
+    lines += _cholesky_body(m)
+    lines.append(f"    return [{', '.join(f'x{i}' for i in range(m))}], {_determinant_and_trace(m)}")
+    return "\n".join(lines) + "\n"
+
+
+def cholesky_solver(size: int) -> Callable:
+    """An unrolled Cholesky solve of ``(A + d·I) x = b`` for a symmetric ``size`` x ``size`` ``A``.
+
+    The returned ``solve(a, b, d)`` takes ``a`` as ``size`` rows of ``size`` floats (what
+    ``ndarray.tolist()`` gives), ``b`` as ``size`` floats and the diagonal shift ``d``
+    (λ², >= 0). It returns ``(x, determinant, trace)``: the solution as a list of ``size``
+    floats, ``det(A + dI)`` and ``tr(A + dI)`` (together a cheap lower bound of the smallest
+    eigenvalue, :func:`smallest_eigenvalue_bound`).
+
+    It returns None when a pivot is not positive: ``A + dI`` is singular (or indefinite, or
+    holds NaN) to working precision.
+    """
+    if not 1 <= size <= 12:
+        raise ValueError(f"cholesky_solver size {size}; valid: 1..12")
+    solver = _CHOLESKY_CACHE.get(size)
+    if solver is None:
+        namespace: dict = {"sqrt": math.sqrt}
+        exec(compile(_cholesky_source(size), f"<manip_kin cholesky {size}>", "exec"), namespace)  # noqa: S102
+        solver = namespace["solve"]
+        _CHOLESKY_CACHE[size] = solver
+    return solver
+
+
+def chain_constants(chain: Callable, dof: int, samples: int = 3, seed: int = 0) -> dict[int, float]:
+    """Entries of a generated chain's output that do not depend on ``q`` (index -> value).
+
+    The chain is evaluated at a few random configurations drawn over [-4, 4] per joint,
+    ignoring limits; an entry equal in all of them is a constant the code generator folded
+    (a zero or unit Jacobian entry), never a coincidence of random floats.
+    """
+    import random
+
+    generator = random.Random(seed)
+    outputs = [chain([generator.uniform(-4.0, 4.0) for _ in range(dof)]) for _ in range(samples)]
+    first = outputs[0]
+    return {
+        index: float(value)
+        for index, value in enumerate(first)
+        if all(output[index] == value for output in outputs[1:])
+    }
+
+
+def _negate(token: str) -> str:
+    return token[1:] if token.startswith("-") else f"-{token}"
+
+
+def _product(a: float | str, b: float | str) -> float | str:
+    """``a * b`` as a constant or an expression; names may carry a leading minus."""
+    if isinstance(a, float) and isinstance(b, float):
+        return a * b
+    if isinstance(a, float) or isinstance(b, float):
+        constant, name = (a, b) if isinstance(a, float) else (b, a)
+        if constant == 0.0:
+            return 0.0
+        if constant == 1.0:
+            return name
+        if constant == -1.0:
+            return _negate(name)
+        return f"{constant!r}*{name}"
+    return f"{a}*{b}"
+
+
+def _sum(terms: Sequence[float | str]) -> str:
+    constant = sum(t for t in terms if isinstance(t, float))
+    parts = [t for t in terms if not isinstance(t, float)]
+    if constant != 0.0 or not parts:
+        parts.append(repr(constant))
+    return " + ".join(parts)
+
+
+def jacobian_entries(
+    dof: int, rows: Sequence[int], tokens: Sequence[str] | None, constants: dict[int, float], offset: int = 16
+) -> dict[tuple[int, int], float | str]:
+    """Task Jacobian entries ``(i, j)`` as constants or expressions over a chain's output.
+
+    Args:
+        dof: number of joints n.
+        rows: task rows of the 6 x n Jacobian.
+        tokens: for generated code that has the chain's output in locals, the expression of
+            every output entry (a name, ``-name`` or a literal); None to read them from a
+            tuple by unpacking into ``j{i}_{j}`` locals.
+        constants: output index -> value for entries that never change (:func:`chain_constants`).
+        offset: index of the Jacobian's first entry in the chain's output.
+    """
+    entries: dict[tuple[int, int], float | str] = {}
+    for i, r in enumerate(rows):
+        for j in range(dof):
+            index = offset + r * dof + j
+            if index in constants:
+                entries[i, j] = constants[index]
+            elif tokens is not None:
+                entries[i, j] = tokens[index]
+            else:
+                entries[i, j] = f"j{i}_{j}"
+    return entries
+
+
+def damped_solve_lines(
+    entries: dict[tuple[int, int], float | str], size: int, dof: int, shifted: bool = True
+) -> tuple[list[str], list[str]]:
+    """Lines forming ``A = J Jᵀ`` (locals ``a{i}_{k}``), its Cholesky factorisation with the
+    diagonal shift ``d`` and the solve of ``A x = b`` (``b{i}`` locals must exist), plus the
+    expressions of ``q̇_j = (Jᵀ x)_j``. The lines ``return None`` on a non-positive pivot."""
+    lines = []
+    for i in range(size):
+        for k in range(i + 1):
+            lines.append(f"    a{i}_{k} = " + _sum([_product(entries[i, j], entries[k, j]) for j in range(dof)]))
+    lines += _cholesky_body(size, shifted)
+    qdot = [_sum([_product(entries[i, j], f"x{i}") for i in range(size)]) for j in range(dof)]
+    return lines, qdot
+
+
+def _damped_solve_source(dof: int, rows: Sequence[int], constants: dict[int, float], offset: int) -> str:
+    n, m = dof, len(rows)
+    entries = jacobian_entries(dof, rows, None, constants, offset)
+    unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n)}
+    lines = ["def solve(values, b, d):"]
+    lines.append("    " + ", ".join(unpacked.get(k, "_") for k in range(offset + 6 * n)) + ", = values")
+    lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
+    body, qdot = damped_solve_lines(entries, m, n)
+    lines += body
+    lines.append(f"    return [{', '.join(qdot)}], {_determinant_and_trace(m)}")
+    return "\n".join(lines) + "\n"
+
+
+def damped_solver(chain: Callable, dof: int, rows: Sequence[int], offset: int = 16) -> Callable:
+    """The damped least-squares step ``q̇ = Jᵀ (J Jᵀ + d I)⁻¹ b``, unrolled for one chain.
+
+    ``J`` is read straight from the flat tuple a generated chain returns (the task ``rows``
+    of the 6 x n geometric Jacobian starting at ``offset``); its constant entries are folded
+    in (see :func:`chain_constants`), ``J Jᵀ`` is formed, Cholesky-factored and solved
+    without any numpy call.
+
+    Args:
+        chain: the generated chain (:func:`manip_kin.kinematics.compiled_kinematics`).
+        dof: number of joints n.
+        rows: task rows, indices into ``[ωx, ωy, ωz, vx, vy, vz]``.
+        offset: index of the Jacobian's first entry in the chain's output.
+
+    Returns:
+        ``solve(values, b, d)`` -> ``(qdot, determinant, trace)`` or None, where ``values`` is
+        the chain's output, ``b`` the ``len(rows)`` task-space values, ``d`` = λ² >= 0;
+        ``determinant`` and ``trace`` are those of ``J Jᵀ + dI`` as in :func:`cholesky_solver`,
+        which also explains the None.
+    """
+    rows = tuple(int(r) for r in rows)
+    key = (id(chain), dof, rows, offset)
+    cached = _DAMPED_CACHE.get(key)
+    if cached is not None and cached[0] is chain:
+        return cached[1]
+    source = _damped_solve_source(dof, rows, chain_constants(chain, dof), offset)
+    namespace: dict = {"sqrt": math.sqrt}
+    exec(compile(source, "<manip_kin damped solve>", "exec"), namespace)  # noqa: S102 - our own source
+    solver = namespace["solve"]
+    # The chain is kept alongside so its id cannot be reused by another object.
+    _DAMPED_CACHE[key] = (chain, solver)
+    return solver

@@ -1,0 +1,373 @@
+"""The resolved-rate control law: error, damped solve, limits, singularities.
+
+Expected values come from independent computations: rotation errors are checked by
+exponentiating them back (textbook Rodrigues), joint rates against numpy's pseudo-inverse of
+a Jacobian obtained by numeric differentiation of the forward kinematics.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from kin_reference import rodrigues
+from manip_kin.control import CartesianController, ControllerConfig, pose_error
+from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError, UnknownFrameError
+from manip_kin.kinematics import frame_pose
+from manip_kin.robots import load_robot
+from manip_kin.rotations import make_transform, rpy_to_matrix
+
+ROBOTS = ("genova7", "mocom7", "irb120", "rpp", "scara")
+
+
+def numeric_jacobian(model, q, frame=None, step=1e-6) -> np.ndarray:
+    """Geometric Jacobian [angular; linear] by central differences of the FK, shape (6, n)."""
+    q = np.asarray(q, dtype=float)
+    columns = []
+    for j in range(model.dof):
+        dq = np.zeros_like(q)
+        dq[j] = step
+        plus, minus = frame_pose(model, q + dq, frame), frame_pose(model, q - dq, frame)
+        # ω× = Ṙ Rᵀ; read ω from the skew part.
+        r_dot = (plus[:3, :3] - minus[:3, :3]) / (2 * step)
+        omega_skew = r_dot @ frame_pose(model, q, frame)[:3, :3].T
+        omega = 0.5 * np.array(
+            [omega_skew[2, 1] - omega_skew[1, 2], omega_skew[0, 2] - omega_skew[2, 0], omega_skew[1, 0] - omega_skew[0, 1]]
+        )
+        columns.append(np.concatenate([omega, (plus[:3, 3] - minus[:3, 3]) / (2 * step)]))
+    return np.array(columns).T
+
+
+def random_rotation(rng) -> np.ndarray:
+    axis = rng.normal(size=3)
+    return rodrigues(axis, rng.uniform(0, math.pi))
+
+
+def genova7_scenario_goal() -> np.ndarray:
+    return make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
+
+
+# --- pose error ---------------------------------------------------------------------------
+
+
+def test_pose_error_rotates_current_onto_goal():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        current = make_transform(random_rotation(rng), rng.normal(size=3))
+        goal = make_transform(random_rotation(rng), rng.normal(size=3))
+        orientation, position = pose_error(current, goal)
+        angle = np.linalg.norm(orientation)
+        assert angle <= math.pi + 1e-12
+        # exp([e]×) applied in base takes the current orientation onto the goal.
+        np.testing.assert_allclose(rodrigues(orientation, angle) @ current[:3, :3], goal[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(position, goal[:3, 3] - current[:3, 3], atol=1e-15)
+
+
+def test_pose_error_is_angle_axis_of_current_R_goal_expressed_in_base():
+    rng = np.random.default_rng(2)
+    current = make_transform(random_rotation(rng))
+    goal = make_transform(random_rotation(rng))
+    orientation, _ = pose_error(current, goal)
+    relative = current[:3, :3].T @ goal[:3, :3]  # current_R_goal
+    # Textbook log for an angle well inside (0, π).
+    angle = math.acos((np.trace(relative) - 1) / 2)
+    axis_in_current = np.array(
+        [relative[2, 1] - relative[1, 2], relative[0, 2] - relative[2, 0], relative[1, 0] - relative[0, 1]]
+    ) / (2 * math.sin(angle))
+    np.testing.assert_allclose(orientation, current[:3, :3] @ axis_in_current * angle, atol=1e-10)
+
+
+def test_pose_error_near_pi_and_zero():
+    current = make_transform(rodrigues([1, 2, 3], 0.3))
+    for angle in (math.pi - 1e-9, math.pi, 1e-12, 0.0):
+        goal = make_transform(rodrigues([0.2, -1, 0.5], angle) @ current[:3, :3])
+        orientation, _ = pose_error(current, goal)
+        assert np.linalg.norm(orientation) == pytest.approx(angle, abs=1e-12)
+        np.testing.assert_allclose(
+            rodrigues(orientation if angle > 0 else [0, 0, 1], np.linalg.norm(orientation)) @ current[:3, :3],
+            goal[:3, :3],
+            atol=1e-9,
+        )
+
+
+def test_controller_error_matches_pose_error():
+    model = load_robot("genova7")
+    q = model.initial_positions
+    goal = genova7_scenario_goal()
+    controller = CartesianController(model)
+    orientation, position = controller.error(q, goal)
+    expected = pose_error(frame_pose(model, q), goal)
+    np.testing.assert_allclose(orientation, expected[0], atol=1e-13)
+    np.testing.assert_allclose(position, expected[1], atol=1e-15)
+    output = controller.step(q, goal, dt=0.001)
+    np.testing.assert_allclose(output.orientation_error, expected[0], atol=1e-13)
+    assert output.orientation_error_norm == pytest.approx(np.linalg.norm(expected[0]), abs=1e-13)
+    assert output.position_error_norm == pytest.approx(np.linalg.norm(expected[1]), abs=1e-15)
+
+
+# --- joint rates --------------------------------------------------------------------------
+
+
+def _goal_near(model, q, rng, frame=None):
+    current = frame_pose(model, q, frame)
+    return make_transform(rodrigues(rng.normal(size=3), 0.3) @ current[:3, :3], current[:3, 3] + rng.normal(scale=0.05, size=3))
+
+
+@pytest.mark.parametrize("robot", ["genova7", "mocom7", "irb120"])
+def test_rates_are_the_pseudo_inverse_of_the_reference_twist(robot):
+    model = load_robot(robot)
+    rng = np.random.default_rng(3)
+    config = ControllerConfig(gain_angular=0.7, gain_linear=1.3, respect_velocity_limits=False, respect_position_limits=False)
+    controller = CartesianController(model, config)
+    checked = 0
+    while checked < 10:
+        q = model.random_configuration(rng, margin=0.1)
+        jacobian = numeric_jacobian(model, q)
+        if np.linalg.svd(jacobian, compute_uv=False)[-1] < 0.05:
+            continue  # near a singularity damping applies; covered below
+        goal = _goal_near(model, q, rng)
+        feed_forward = (rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.05)
+        output = controller.step(q, goal, feed_forward, dt=0.002)
+        orientation, position = pose_error(frame_pose(model, q), goal)
+        reference = np.concatenate([0.7 * orientation + feed_forward[0], 1.3 * position + feed_forward[1]])
+        np.testing.assert_allclose(output.qdot, np.linalg.pinv(jacobian) @ reference, atol=1e-7)
+        assert output.damping == 0.0 and not output.singular and output.velocity_scale == 1.0
+        assert output.manipulability == pytest.approx(math.sqrt(np.linalg.det(jacobian @ jacobian.T)), rel=1e-6)
+        checked += 1
+
+
+def test_fast_and_general_paths_agree():
+    """The generated common-case step and the general path compute the same law."""
+    rng = np.random.default_rng(4)
+    for robot in ROBOTS:
+        model = load_robot(robot)
+        fast = CartesianController(model)
+        assert fast._fused_step is not None, robot  # the bundled robots all take the fast path
+        general = CartesianController(model)
+        general._fused_step = None
+        for _ in range(20):
+            q = model.random_configuration(rng, margin=0.05)
+            goal = _goal_near(model, q, rng)
+            twist = (rng.normal(size=3), rng.normal(size=3))
+            for dt in (0.002, 0.5):  # a long period makes limits matter
+                a, b = fast.step(q, goal, twist, dt), general.step(q, goal, twist, dt)
+                np.testing.assert_allclose(a.qdot, b.qdot, rtol=1e-9, atol=1e-12)
+                np.testing.assert_allclose(a.orientation_error, b.orientation_error, atol=1e-13)
+                assert a.manipulability == pytest.approx(b.manipulability, rel=1e-9)
+                assert (a.damping, a.singular, a.limited_joints) == (b.damping, b.singular, b.limited_joints)
+                assert a.velocity_scale == pytest.approx(b.velocity_scale, rel=1e-12)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_rates_produce_the_reference_twist_on_the_task(robot):
+    """J q̇ = K e on the task components (checked by moving along q̇ a tiny bit)."""
+    model = load_robot(robot)
+    rng = np.random.default_rng(5)
+    controller = CartesianController(model, ControllerConfig(respect_velocity_limits=False))
+    rows = list(controller.task.rows)
+    for _ in range(5):
+        q = model.random_configuration(rng, margin=0.2)
+        if np.linalg.svd(numeric_jacobian(model, q)[rows], compute_uv=False)[-1] < 0.05:
+            continue
+        goal = _goal_near(model, q, rng)
+        output = controller.step(q, goal, dt=1e-3)
+        achieved = numeric_jacobian(model, q) @ output.qdot
+        reference = np.concatenate([0.8 * output.orientation_error, 0.8 * output.position_error])
+        np.testing.assert_allclose(achieved[rows], reference[rows], atol=1e-7)
+
+
+def test_default_tasks_for_under_actuated_arms():
+    assert CartesianController(load_robot("scara")).task.name == "position_yaw"
+    assert CartesianController(load_robot("rpp")).task.name == "position"
+    assert CartesianController(load_robot("genova7")).task.name == "full"
+    assert CartesianController(load_robot("genova7"), ControllerConfig(task="position")).task.rows == (3, 4, 5)
+    assert CartesianController(load_robot("genova7"), ControllerConfig(task=(0, 0, 1, 1, 1, 1))).task.name == "position_yaw"
+
+
+def test_controlled_frame_can_be_chosen():
+    model = load_robot("genova7")
+    rng = np.random.default_rng(6)
+    q = model.initial_positions
+    goal = _goal_near(model, q, rng, frame="ee")
+    output = CartesianController(model, ControllerConfig(frame="ee", respect_velocity_limits=False)).step(q, goal)
+    expected = pose_error(frame_pose(model, q, "ee"), goal)
+    np.testing.assert_allclose(output.position_error, expected[1], atol=1e-15)
+    achieved = numeric_jacobian(model, q, "ee") @ output.qdot
+    np.testing.assert_allclose(achieved, 0.8 * np.concatenate(expected), atol=1e-7)
+    with pytest.raises(UnknownFrameError):
+        CartesianController(model, ControllerConfig(frame="camera"))
+
+
+# --- velocity limits ----------------------------------------------------------------------
+
+
+def test_velocity_limits_scale_the_whole_vector():
+    model = load_robot("genova7")
+    q = model.initial_positions
+    goal = genova7_scenario_goal()
+    config = ControllerConfig(gain_angular=20.0, gain_linear=20.0)
+    limited = CartesianController(model, config).step(q, goal, dt=0.001)
+    free = CartesianController(model, ControllerConfig(gain_angular=20.0, gain_linear=20.0, respect_velocity_limits=False)).step(
+        q, goal, dt=0.001
+    )
+    ratios = np.abs(free.qdot) / model.velocity_limits
+    assert ratios.max() > 1.0  # the unscaled command would exceed a limit
+    assert limited.velocity_scale == pytest.approx(1.0 / ratios.max(), rel=1e-12)
+    np.testing.assert_allclose(limited.qdot, free.qdot / ratios.max(), rtol=1e-12)
+    assert np.max(np.abs(limited.qdot) / model.velocity_limits) == pytest.approx(1.0, abs=1e-12)
+
+
+# --- position limits ----------------------------------------------------------------------
+
+
+def test_joint_at_a_limit_is_not_pushed_and_the_task_is_redistributed():
+    model = load_robot("genova7")
+    rng = np.random.default_rng(7)
+    controller = CartesianController(model, ControllerConfig(respect_velocity_limits=False))
+    ignoring = CartesianController(model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False))
+    found = 0
+    for _ in range(400):
+        q = model.random_configuration(rng, margin=0.1)
+        q[5] = 0.0  # the prismatic joint at its lower limit
+        goal = _goal_near(model, q, rng)
+        if ignoring.step(q, goal, dt=0.001).qdot[5] >= 0.0:
+            continue  # the unconstrained solution would not push it further
+        jacobian = numeric_jacobian(model, q)
+        others = np.delete(jacobian, 5, axis=1)
+        if np.linalg.svd(others, compute_uv=False)[-1] < 0.05:
+            continue
+        output = controller.step(q, goal, dt=0.001)
+        assert output.limited_joints == (5,)
+        assert output.qdot[5] == 0.0
+        # The six other joints still produce the whole reference twist.
+        reference = 0.8 * np.concatenate([output.orientation_error, output.position_error])
+        np.testing.assert_allclose(jacobian @ output.qdot, reference, atol=1e-7)
+        np.testing.assert_allclose(output.qdot[np.arange(7) != 5], np.linalg.pinv(others) @ reference, atol=1e-7)
+        found += 1
+        if found == 5:
+            break
+    assert found == 5
+
+
+def test_joint_approaching_a_limit_lands_exactly_on_it():
+    model = load_robot("genova7")
+    rng = np.random.default_rng(8)
+    controller = CartesianController(model, ControllerConfig(respect_velocity_limits=False))
+    ignoring = CartesianController(model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False))
+    dt = 0.001
+    for _ in range(200):
+        q = model.random_configuration(rng, margin=0.1)
+        q[5] = 1e-5  # 10 µm above the lower limit
+        goal = _goal_near(model, q, rng)
+        if q[5] + ignoring.step(q, goal, dt=dt).qdot[5] * dt >= 0.0:
+            continue  # this step would not reach the limit
+        output = controller.step(q, goal, dt=dt)
+        assert output.limited_joints == (5,)
+        assert q[5] + output.qdot[5] * dt == pytest.approx(0.0, abs=1e-15)
+        return
+    pytest.fail("no configuration moving the prismatic joint down")
+
+
+def test_joint_outside_its_limits_may_move_back_only():
+    model = load_robot("genova7")
+    controller = CartesianController(model)
+    q = np.array(model.initial_positions)
+    q[5] = -0.01  # below the lower limit 0
+    for goal_offset in ([0, 0, 0.05], [0, 0, -0.05], [0.05, 0, 0], [0, 0.05, 0]):
+        current = frame_pose(model, q)
+        goal = make_transform(current[:3, :3], current[:3, 3] + goal_offset)
+        output = controller.step(q, goal, dt=0.001)
+        assert output.qdot[5] >= 0.0
+        assert np.all(np.isfinite(output.qdot))
+
+
+# --- singularities ------------------------------------------------------------------------
+
+
+def test_stretched_scara_rates_stay_bounded():
+    model = load_robot("scara")
+    goal = make_transform(rodrigues([0, 0, 1], math.pi / 4), [0.7, 0.7, 0.2])
+    controller = CartesianController(model)
+    output = controller.step(np.zeros(4), goal, dt=0.001)
+    assert output.singular and output.damping > 0.0
+    assert np.all(np.isfinite(output.qdot))
+    assert np.all(np.abs(output.qdot) <= model.velocity_limits * (1 + 1e-12))
+    assert np.abs(output.qdot).max() > 0.1  # it moves: the singularity does not stop the arm
+    assert output.manipulability == pytest.approx(0.0, abs=1e-9)
+
+
+def test_irb120_wrist_singularity_rates_stay_bounded():
+    model = load_robot("irb120")
+    q = np.array([0.3, 0.2, -0.4, 0.5, 0.0, -0.2])  # q5 = 0: axes 4 and 6 aligned
+    assert np.linalg.svd(numeric_jacobian(model, q), compute_uv=False)[-1] < 1e-6
+    controller = CartesianController(model)
+    current = frame_pose(model, q)
+    for rotation_axis in ([0, 0, 1], [0, 1, 0], [1, 0, 0]):
+        goal = make_transform(rodrigues(rotation_axis, 0.5) @ current[:3, :3], current[:3, 3] + [0.02, -0.03, 0.01])
+        output = controller.step(q, goal, dt=0.001)
+        assert output.singular and output.damping == pytest.approx(controller.config.damping_max, rel=1e-6)
+        assert np.all(np.isfinite(output.qdot))
+        assert np.all(np.abs(output.qdot) <= model.velocity_limits * (1 + 1e-12))
+
+
+def test_damping_rises_smoothly_below_the_threshold():
+    """Approaching the stretched scara, λ goes continuously from 0 to λ_max as σ_min -> 0."""
+    model = load_robot("scara")
+    config = ControllerConfig(respect_velocity_limits=False)
+    controller = CartesianController(model, config)
+    goal = make_transform(np.eye(3), [0.5, 0.5, 0.2])
+    rows = list(controller.task.rows)
+    previous_sigma, previous_damping = None, None
+    dampings = []
+    for elbow in np.linspace(0.3, 0.0, 301):
+        q = np.array([0.0, elbow, 0.1, 0.0])
+        sigma = np.linalg.svd(numeric_jacobian(model, q)[rows], compute_uv=False)[-1]
+        output = controller.step(q, goal, dt=0.001)
+        epsilon, damping_max = config.singular_threshold, config.damping_max
+        expected = damping_max * math.sqrt(max(0.0, 1 - (sigma / epsilon) ** 2))
+        assert output.damping == pytest.approx(expected, abs=1e-6)
+        assert output.singular == (sigma < epsilon - 1e-9) or abs(sigma - epsilon) < 1e-6
+        if previous_damping is not None:
+            assert output.damping >= previous_damping - 1e-12
+            # continuity: a small step in σ gives a small step in λ
+            assert abs(output.damping - previous_damping) < 0.25 * damping_max
+        previous_sigma, previous_damping = sigma, output.damping
+        dampings.append(output.damping)
+    assert dampings[0] == 0.0 and dampings[-1] == pytest.approx(config.damping_max)
+    assert previous_sigma < 1e-12
+
+
+# --- bad input ----------------------------------------------------------------------------
+
+
+def test_bad_inputs_raise_clear_errors():
+    model = load_robot("genova7")
+    controller = CartesianController(model)
+    q = model.initial_positions
+    goal = genova7_scenario_goal()
+    with pytest.raises(JointCountError, match="6 values.*7 joints"):
+        controller.step(q[:6], goal)
+    with pytest.raises(InvalidArgumentError, match="dt"):
+        controller.step(q, goal, dt=0.0)
+    with pytest.raises(InvalidArgumentError, match="dt"):
+        controller.step(q, goal, dt=float("nan"))
+    with pytest.raises(NonFiniteError):
+        controller.step(np.full(7, np.nan), goal)
+    with pytest.raises(NonFiniteError):
+        controller.step(np.array([0, 0, 0, np.inf, 0, 0.1, 0]), goal)
+    bad_goal = goal.copy()
+    bad_goal[0, 3] = np.nan
+    with pytest.raises(NonFiniteError):
+        controller.step(q, bad_goal)
+    with pytest.raises(InvalidArgumentError, match="4x4"):
+        controller.step(q, np.eye(3))
+    with pytest.raises(InvalidArgumentError, match="goal_twist"):
+        controller.step(q, goal, goal_twist=np.zeros(6))
+    with pytest.raises(InvalidArgumentError, match="gain_linear"):
+        ControllerConfig(gain_linear=-1.0)
+    with pytest.raises(InvalidArgumentError, match="singular_threshold"):
+        ControllerConfig(singular_threshold=0.0)
+    with pytest.raises(ManipKinError, match="task"):
+        CartesianController(model, ControllerConfig(task="elbow"))
