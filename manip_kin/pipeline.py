@@ -82,6 +82,21 @@ def ensure_ros_isolation(environ: dict | None = None) -> dict:
     return environ
 
 
+def fresh_domain_env(environ: Mapping[str, str] | None = None) -> dict:
+    """A copy of ``environ`` (default ``os.environ``) on a free ``ROS_DOMAIN_ID`` of its own.
+
+    For two pipelines alive at once in one test session: on a shared domain their topics
+    would mix.
+    """
+    env = dict(os.environ if environ is None else environ)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    taken = env.get("ROS_DOMAIN_ID", "")
+    candidates = [d for d in range(1, 101) if str(d) != taken]
+    random.SystemRandom().shuffle(candidates)
+    env["ROS_DOMAIN_ID"] = str(next((d for d in candidates if _domain_is_free(d)), candidates[0]))
+    return env
+
+
 def find_executable(name: str, executable_dir: str | os.PathLike | None = None) -> str:
     """Path of a node executable: in ``executable_dir`` if given, else next to this Python, else on PATH."""
     if executable_dir is not None:

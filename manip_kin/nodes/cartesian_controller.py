@@ -196,7 +196,10 @@ class CartesianControllerNode(Node):
                 qdot = output.qdot
                 self.state, self.detail = self._classify(output, twist_fresh and self._twist_moving)
         self._command_pub.publish(self._command_cdr.encode(qdot))
-        if self.state != previous_state or now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
+        since = now_ns - self._last_diagnostics_ns
+        # A state change is reported at once, but at most every 20 ms: near a limit the state
+        # can flicker cycle to cycle, and a status costs ~0.2 ms to build.
+        if since >= self._diagnostics_period_ns or (self.state != previous_state and since >= 20_000_000):
             self._last_diagnostics_ns = now_ns
             self._publish_diagnostics(now_ns)
 

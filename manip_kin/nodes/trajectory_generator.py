@@ -232,7 +232,10 @@ class TrajectoryGeneratorNode(Node):
                 self.final_goal_stamp = conv.stamp_key(conv.ns_to_stamp(stamp_ns))
                 self.state, self.detail = "holding", "line finished, final pose sent"
                 self.get_logger().info(f"line finished after {elapsed:.3f} s; holding the final pose")
-        if self.state != previous_state or now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
+        since = now_ns - self._last_diagnostics_ns
+        # A state change is reported at once, but at most every 20 ms: near a limit the state
+        # can flicker cycle to cycle, and a status costs ~0.2 ms to build.
+        if since >= self._diagnostics_period_ns or (self.state != previous_state and since >= 20_000_000):
             self._last_diagnostics_ns = now_ns
             self._publish_diagnostics()
 
