@@ -10,6 +10,7 @@ recording's time, so nodes with ``use_sim_time`` follow the replay.
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -25,6 +26,7 @@ VOLATILE_MIN_DEPTH = 100  # a replay burst must not overwrite unacknowledged rel
 CLOCK_PERIOD_S = 0.01  # /clock at 100 Hz while waiting between messages, as rosbag2's default
 PROGRESS_PERIOD_S = 0.25
 ACK_WAIT_S = 0.3
+MATCH_SETTLE_S = 0.25
 
 
 @dataclass(frozen=True)
@@ -181,7 +183,12 @@ def replay(
             clock_publisher = node.create_publisher(
                 clock_class, "/clock", QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
             )
-        _wait_for_subscribers(list(publishers.values()), options.wait_for_subscribers_s, should_stop)
+        unmatched = _wait_for_subscribers(list(publishers.values()), options.wait_for_subscribers_s, should_stop)
+        if unmatched and progress is not None and options.wait_for_subscribers_s > 0:
+            progress.write(
+                f"replay: no subscriber after {options.wait_for_subscribers_s:g} s on {' '.join(unmatched)}; "
+                "publishing anyway\n"
+            )
         report = _play(path, info, options, selected, publishers, clock_publisher, clock_class, progress, should_stop)
         for publisher in publishers.values():
             # Reliable samples still in flight would be lost if the process exited now. Fast DDS
@@ -201,13 +208,20 @@ def _duration(seconds: float) -> Any:
     return Duration(nanoseconds=int(seconds * NS_PER_S))
 
 
-def _wait_for_subscribers(publishers: list[Any], timeout_s: float, should_stop: Callable[[], bool]) -> None:
+def _wait_for_subscribers(publishers: list[Any], timeout_s: float, should_stop: Callable[[], bool]) -> list[str]:
+    """Wait until every publisher is matched; return the topics still without a subscriber."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and not should_stop():
-        if all(p.get_subscription_count() > 0 for p in publishers):
-            time.sleep(0.05)  # matched is not yet reader-ready for reliable handshakes
-            return
+    while not should_stop():
+        unmatched = [p.topic_name for p in publishers if p.get_subscription_count() == 0]
+        if not unmatched:
+            # The writer side matches first; a sample sent before the reader side has matched
+            # too arrives only with a later retransmission, hundreds of ms late.
+            time.sleep(MATCH_SETTLE_S)
+            return []
+        if time.monotonic() >= deadline:
+            return unmatched
         time.sleep(0.02)
+    return []
 
 
 def _play(
@@ -237,9 +251,13 @@ def _play(
 
     while True:
         report.loops += 1
+        messages = iter_raw_messages(path, selected, start_ns=begin_ns)
+        first = next(messages, None)  # opens the file and decodes a chunk: before the clock starts
+        if first is None:
+            break
         wall_zero = time.monotonic()
         next_clock = wall_zero
-        for raw in iter_raw_messages(path, selected, start_ns=begin_ns):
+        for raw in itertools.chain((first,), messages):
             target = wall_zero + (raw.log_time_ns - begin_ns) / NS_PER_S / options.rate
             while True:
                 if should_stop():

@@ -1,0 +1,174 @@
+"""``manip_kin replay`` as a subprocess into subscribers in this test process.
+
+The recording is written with known receive times; the test checks that the
+messages arrive complete, in order, with the recorded spacing (``--rate 2``
+halves it), on remapped topics, with the recorded QoS, and that garbage or
+truncated files are refused with one line and exit code 2.
+"""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from manip_kin.recording import RecordingWriter
+from manip_kin.recording.qos import default_offer
+
+REPO = Path(__file__).resolve().parents[1]
+MANIP_KIN = REPO / ".venv" / "bin" / "manip_kin"
+T0 = 1_700_000_000_000_000_000
+MS = 1_000_000
+# Irregular spacing (20..60 ms) so that timing is checked, not just the count.
+GAPS_MS = [20, 40, 60, 30, 50] * 6
+LOG_TIMES = [T0 + sum(GAPS_MS[:i]) * MS for i in range(len(GAPS_MS) + 1)]
+DURATION_S = (LOG_TIMES[-1] - LOG_TIMES[0]) / 1e9
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("replay") / "run.mcap"
+    with RecordingWriter(path) as writer:
+        writer.add_topic("/robot_description", "std_msgs/msg/String",
+                         offered_qos_profiles=default_offer(transient_local=True, depth=1))
+        writer.write("/robot_description", String(data="<robot name='r'/>"), log_time_ns=LOG_TIMES[0])
+        for i, log_time in enumerate(LOG_TIMES):
+            message = JointState(name=["joint_1"], position=[float(i)])
+            message.header.stamp.sec, message.header.stamp.nanosec = divmod(log_time, 1_000_000_000)
+            writer.write("/joint_states", message, log_time_ns=log_time)
+    return path
+
+
+class Listener:
+    """Subscriptions spun in a background thread; arrival times on the monotonic clock."""
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(f"replay_listener_{time.monotonic_ns()}", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received: dict[str, list] = {}
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self._running and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def listen(self, msg_type, topic: str, qos) -> list:
+        arrivals = self.received.setdefault(topic, [])
+        self.node.create_subscription(msg_type, topic, lambda m: arrivals.append((time.monotonic(), m)), qos)
+        return arrivals
+
+    def close(self):
+        self._running = False
+        self._thread.join(timeout=5)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def listener():
+    instance = Listener()
+    try:
+        yield instance
+    finally:
+        instance.close()
+
+
+def run_replay(*arguments: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    # Discovery of a new participant usually takes ~0.1 s, but when its first announcements are
+    # missed it waits for the next periodic one (3 s): allow that before the first message.
+    command = [str(MANIP_KIN), "replay", *arguments, "--wait-for-subscribers", "8"]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def wait_for(predicate, timeout: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not predicate():
+        time.sleep(0.02)
+
+
+def _timing_errors(arrivals: list, rate: float) -> list[float]:
+    """Per message: arrival time minus its recorded offset / rate, minus the median of that [s].
+
+    Relative to the median rather than to the first message, so one late first
+    delivery does not shift every other message's error.
+    """
+    lags = [arrival - (log_time - LOG_TIMES[0]) / 1e9 / rate for (arrival, _), log_time in zip(arrivals, LOG_TIMES)]
+    reference = statistics.median(lags)
+    return [lag - reference for lag in lags]
+
+
+def test_replay_reproduces_messages_timing_and_qos(recording, listener):
+    states = listener.listen(JointState, "/replayed/joint_states", 100)
+    description = listener.listen(
+        String, "/robot_description", QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    )
+    result = run_replay(str(recording), "--remap", "/joint_states:=/replayed/joint_states")
+    assert result.returncode == 0, result.stderr
+    assert "replay:" in result.stderr  # the progress line
+    wait_for(lambda: len(states) == len(LOG_TIMES))
+    assert [m.position[0] for _, m in states] == [float(i) for i in range(len(LOG_TIMES))], result.stderr
+    assert [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec) for _, m in states] == LOG_TIMES
+    errors = _timing_errors(states, 1.0)
+    assert statistics.median(abs(e) for e in errors) < 0.010, errors
+    assert max(abs(e) for e in errors) < 0.08, errors
+    assert [m.data for _, m in description] == ["<robot name='r'/>"]
+
+
+def test_rate_two_halves_the_duration_and_clock_follows_the_recording(recording, listener):
+    states = listener.listen(JointState, "/joint_states", 100)
+    clock = listener.listen(Clock, "/clock", QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    result = run_replay(str(recording), "--rate", "2", "--clock", "--topics", "/joint_states", "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert "replay:" not in result.stderr
+    wait_for(lambda: len(states) == len(LOG_TIMES))
+    assert len(states) == len(LOG_TIMES)
+    span = states[-1][0] - states[0][0]
+    assert span == pytest.approx(DURATION_S / 2, abs=0.08)
+    assert max(abs(e) for e in _timing_errors(states, 2.0)) < 0.08
+    times = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in clock]
+    assert len(times) > 20
+    assert times == sorted(times)
+    assert LOG_TIMES[0] <= times[0] and times[-1] == LOG_TIMES[-1]
+
+
+def test_start_offset_skips_the_beginning(recording, listener):
+    states = listener.listen(JointState, "/joint_states", 100)
+    result = run_replay(str(recording), "--start-offset", "0.5", "--topics", "/joint_states", "--quiet")
+    assert result.returncode == 0, result.stderr
+    expected = [float(i) for i, t in enumerate(LOG_TIMES) if t >= LOG_TIMES[0] + 500 * MS]
+    wait_for(lambda: len(states) >= len(expected))
+    assert [m.position[0] for _, m in states] == expected
+
+
+@pytest.mark.parametrize("content", ["garbage", "truncated"])
+def test_replay_of_a_bad_file_fails_cleanly(recording, tmp_path, content):
+    bad = tmp_path / f"{content}.mcap"
+    data = recording.read_bytes()
+    bad.write_bytes(b"\x00\x01garbage" * 100 if content == "garbage" else data[: len(data) * 2 // 3])
+    result = run_replay(str(bad))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("manip_kin replay: error:") and str(bad) in lines[0]
+
+
+def test_replay_rejects_unknown_topic_and_bad_rate(recording):
+    result = run_replay(str(recording), "--topics", "/nope")
+    assert result.returncode == 2 and "/nope" in result.stderr and "/joint_states" in result.stderr
+    result = run_replay(str(recording), "--rate", "0")
+    assert result.returncode == 2 and "--rate" in result.stderr
