@@ -43,7 +43,8 @@ def _start(harness, **params):
 
 def _state_stream(harness, pose=START, q=Q0):
     def stream():
-        harness.publish("/tool_pose", conv.make_pose_stamped(pose, "base_link"))
+        # Stamped now: the generator judges the tool pose's age by its stamp.
+        harness.publish("/tool_pose", conv.make_pose_stamped(pose, "base_link", harness.node.get_clock().now().to_msg()))
         harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, q))
 
     return stream
@@ -116,10 +117,18 @@ def test_rejects_bad_and_unreachable_targets(harness, capfd):
     assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
 
 
-def test_no_tool_pose_rejected(harness):
-    node, goals, _, _, _ = _start(harness)
+def test_no_or_old_tool_pose_rejected(harness):
+    node, goals, _, _, _ = _start(harness, tool_pose_timeout=0.5)
     harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
     assert harness.spin_until(lambda: node.rejected_targets == 1, 3)
+    assert "no current /tool_pose" in node.last_rejection and not goals
+    # A tool pose stamped 2 s ago is too old to start a line from.
+    old = conv.ns_to_stamp(harness.node.get_clock().now().nanoseconds - 2_000_000_000)
+    harness.publish("/tool_pose", conv.make_pose_stamped(START, "base_link", old))
+    harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, Q0))
+    harness.spin_for(0.1)
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
+    assert harness.spin_until(lambda: node.rejected_targets == 2, 3)
     assert "no current /tool_pose" in node.last_rejection and not goals
 
 

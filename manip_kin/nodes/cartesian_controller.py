@@ -111,7 +111,7 @@ class CartesianControllerNode(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
         self._zeros = np.zeros(self.model.dof)
-        self._mapper = conv.JointStateMapper(self.model.joint_names)
+        self._joint_states = conv.JointStateDecoder(self.model.joint_names)
 
         self.q: np.ndarray | None = None
         self._q_time_ns = 0
@@ -143,9 +143,10 @@ class CartesianControllerNode(Node):
     # --- inputs --------------------------------------------------------------------------------
 
     def _take_inputs(self, now_ns: int) -> None:
-        while (msg := self._joint_state_sub.take()) is not None:
+        # Joint states arrive every cycle: decoded from their bytes (see JointStateDecoder).
+        while (data := self._joint_state_sub.take(raw=True)) is not None:
             try:
-                self.q = self._mapper.positions(msg)
+                self.q = self._joint_states.positions(data)
                 self._q_time_ns = now_ns
             except conv.InvalidMessageError as error:
                 self.rejected_joint_states += 1

@@ -531,3 +531,79 @@ def problem_kind(reason: str) -> str:
     if "values; valid" in reason or "names but" in reason or "lacks joints" in reason:
         return "length"
     return "other"
+
+
+# --- decoding the 1 kHz inputs from their CDR bytes ---------------------------------------------
+
+
+def _align(offset: int, size: int) -> int:
+    return offset + (-offset) % size
+
+
+class JointStateDecoder:
+    """Model-order positions from serialised ``JointState`` bytes (``take_message(raw=True)``).
+
+    Building the Python message costs ~30 µs per ``JointState``; a driver sends the same
+    names in the same order every time, so after the first message the decoder checks
+    that the header's frame id and the names are byte-identical to the learned ones and
+    reads the positions straight from the buffer. Anything else (other names or order,
+    other frame id) goes through ``deserialize_message`` and :class:`JointStateMapper`.
+
+    Args:
+        joint_names: the model's joint names in model order.
+    """
+
+    def __init__(self, joint_names: Sequence[str]):
+        from sensor_msgs.msg import JointState as _JointState
+
+        self._msg_type = _JointState
+        self._mapper = JointStateMapper(joint_names)
+        self._count = len(joint_names)
+        self._blob: bytes | None = None
+        self._count_at = 0
+        self._values_at = 0
+
+    def positions(self, data: bytes) -> np.ndarray:
+        """Positions in model order, shape (n,); :class:`InvalidMessageError` as :class:`JointStateMapper`."""
+        blob = self._blob
+        if blob is not None and data[12 : 12 + len(blob)] == blob:
+            (count,) = struct.unpack_from("<I", data, self._count_at)
+            if count == self._count and len(data) >= self._values_at + 8 * count:
+                values = np.frombuffer(data, dtype="<f8", count=count, offset=self._values_at).copy()
+                if not np.all(np.isfinite(values)):
+                    raise InvalidMessageError("joint state positions contain NaN or infinity; valid: finite numbers")
+                return values
+        from rclpy.serialization import deserialize_message
+
+        msg = deserialize_message(data, self._msg_type)
+        values = self._mapper.positions(msg)
+        if list(msg.name) == self._mapper.joint_names and len(msg.position) == self._count:
+            self._learn(data)
+        return values
+
+    def _learn(self, data: bytes) -> None:
+        # Payload offsets (after the 4-byte encapsulation): stamp 0..8, frame_id at 8.
+        (frame_length,) = struct.unpack_from("<I", data, 4 + 8)
+        offset = _align(8 + 4 + frame_length, 4)
+        (name_count,) = struct.unpack_from("<I", data, 4 + offset)
+        offset += 4
+        for _ in range(name_count):
+            offset = _align(offset, 4)
+            (length,) = struct.unpack_from("<I", data, 4 + offset)
+            offset += 4 + length
+        self._blob = bytes(data[12 : 4 + offset])
+        count_offset = _align(offset, 4)
+        self._count_at = 4 + count_offset
+        self._values_at = 4 + _align(count_offset + 4, 8)
+
+
+def decode_float64_array(data: bytes) -> np.ndarray:
+    """The ``data`` of serialised ``Float64MultiArray`` bytes as a float64 vector (a copy)."""
+    (dimensions,) = struct.unpack_from("<I", data, 4)
+    if dimensions == 0 and len(data) >= 16:
+        (count,) = struct.unpack_from("<I", data, 12)
+        if len(data) >= 20 + 8 * count:
+            return np.frombuffer(data, dtype="<f8", count=count, offset=20).copy() if count else np.zeros(0)
+    from rclpy.serialization import deserialize_message
+
+    return np.array(deserialize_message(data, Float64MultiArray).data, dtype=float)

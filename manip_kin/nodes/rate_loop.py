@@ -66,11 +66,11 @@ class PolledSubscription:
         """The underlying rclpy subscription (topic name, publisher count)."""
         return self._subscription
 
-    def take(self):
-        """The oldest unread message, or None when there is none. Never blocks."""
+    def take(self, raw: bool = False):
+        """The oldest unread message (its CDR ``bytes`` with ``raw``), or None. Never blocks."""
         handle = self._subscription.handle
         with handle:
-            taken = handle.take_message(self._msg_type, False)
+            taken = handle.take_message(self._msg_type, raw)
         return None if taken is None else taken[0]
 
 

@@ -208,14 +208,14 @@ class RobotStateNode(Node):
 
     def _take_commands(self, now_ns: int) -> None:
         dof = self.model.dof
-        while (msg := self._command_sub.take()) is not None:
-            values = np.frombuffer(msg.data, dtype=np.float64) if len(msg.data) else np.zeros(0)
+        while (data := self._command_sub.take(raw=True)) is not None:
+            values = conv.decode_float64_array(data)
             problem = conv.command_problem(values, dof)
             if problem is not None:
                 self.rejected_commands += 1
                 self._warn(conv.problem_kind(problem), f"rejected /joint_velocity_commands: {problem}; keeping the previous command")
                 continue
-            self._command = values.copy()
+            self._command = values
             self._command_time_ns = now_ns
 
     def _cycle(self, now_ns: int) -> None:

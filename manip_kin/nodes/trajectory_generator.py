@@ -100,8 +100,10 @@ class TrajectoryGeneratorNode(Node):
         self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
 
         self._target_sub = PolledSubscription(self, PoseStamped, "/line_target", 10)
-        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "/tool_pose", 10)
-        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 10)
+        # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
+        # not turning 2 kHz of state messages into Python objects keeps this loop cheap.
+        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "/tool_pose", 1)
+        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 1)
         self._goal_pub = self.create_publisher(PoseStamped, "/goal_pose", 10)
         self._twist_pub = self.create_publisher(TwistStamped, "/goal_twist", 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
@@ -112,7 +114,6 @@ class TrajectoryGeneratorNode(Node):
         self._mapper = conv.JointStateMapper(self.model.joint_names)
 
         self._tool_pose_msg: PoseStamped | None = None
-        self._tool_pose_time_ns = 0
         self._joint_state_msg: JointState | None = None
         self.line: LineTrajectory | None = None
         self._line_start_ns = 0
@@ -139,12 +140,7 @@ class TrajectoryGeneratorNode(Node):
     # --- inputs --------------------------------------------------------------------------------
 
     def _take_inputs(self, now_ns: int) -> PoseStamped | None:
-        """Drain the inputs; return the newest valid target (None when there is none)."""
-        while (msg := self._tool_pose_sub.take()) is not None:
-            self._tool_pose_msg = msg
-            self._tool_pose_time_ns = now_ns
-        while (msg := self._joint_state_sub.take()) is not None:
-            self._joint_state_msg = msg
+        """Drain the targets; return the newest valid one (None when there is none)."""
         target = None
         while (msg := self._target_sub.take()) is not None:
             problem = conv.pose_problem(msg, self.base_frame, "line target", self._quaternion_tolerance)
@@ -168,7 +164,12 @@ class TrajectoryGeneratorNode(Node):
 
     def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
         """Plan a line to ``target_msg``; True when it replaced the running line."""
-        if self._tool_pose_msg is None or now_ns - self._tool_pose_time_ns > self._tool_pose_timeout_ns:
+        while (msg := self._tool_pose_sub.take()) is not None:
+            self._tool_pose_msg = msg
+        while (msg := self._joint_state_sub.take()) is not None:
+            self._joint_state_msg = msg
+        clock_ns = self.get_clock().now().nanoseconds
+        if self._tool_pose_msg is None or clock_ns - conv.stamp_to_ns(self._tool_pose_msg.header.stamp) > self._tool_pose_timeout_ns:
             self._reject(target_msg, "no current /tool_pose (is robot_state running?)")
             return False
         tool_problem = conv.pose_problem(self._tool_pose_msg, self.base_frame, "tool pose", self._quaternion_tolerance)
