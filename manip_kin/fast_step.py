@@ -1,4 +1,4 @@
-"""The common case of one control step as a single generated Python function.
+"""The control step and the IK iteration, each as a single generated Python function.
 
 :class:`manip_kin.control.CartesianController` runs every cycle. Away from singularities
 and position limits a step is: forward kinematics and Jacobian, the pose error, the
@@ -13,6 +13,9 @@ else is needed — a possible singularity (the cheap eigenvalue bound does not c
 joint that would cross a position limit, a non-finite value — and the controller then
 runs its general path (:meth:`CartesianController._step_general`), which is also the
 reference the tests compare this one with.
+
+:func:`ik_iteration_source` does the same for one iteration of the damped least-squares IK
+(:mod:`manip_kin.ik`).
 """
 
 from __future__ import annotations
@@ -24,7 +27,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.unrolled_linalg import (
+    _cholesky_body,
     _determinant_and_trace,
+    _product,
+    _sum,
     chain_constants,
     damped_solve_lines,
     jacobian_entries,
@@ -33,7 +39,7 @@ from manip_kin.unrolled_linalg import (
 # Locals of the generated step: upper-case names and the solver's (a, b, d, l, p, r, x, y
 # with digits). The chain's own locals (q0.., c0.., s0.., v0.. today) must not be among
 # them: checked on generation.
-_STEP_NAMES = re.compile(r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|p\d+|r\d+|x\d+|y\d+)$")
+_STEP_NAMES = re.compile(r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|p\d+|r\d+|x\d+|y\d+|weight|shift|step|g|q|f|dt)$")
 _ASSIGNMENT = re.compile(r"^\s*([A-Za-z_][\w\s,]*?)\s*=(?!=)")
 
 _ROTVEC = """\
@@ -89,6 +95,37 @@ def _assigned_names(lines: Sequence[str]) -> set[str]:
     return names
 
 
+def _chain_and_error_lines(header: str, chain: Callable, dof: int) -> tuple[list[str], list[str], dict[int, float]]:
+    """The function header, ``Q0..`` unpacked, the chain body and the pose error ``E0..E5``.
+
+    Returns the lines, the chain's output expressions and its constant outputs.
+    """
+    chain_lines, tokens = _split_chain_source(chain.source)
+    clashes = sorted(name for name in _assigned_names(chain_lines) if _STEP_NAMES.match(name))
+    if clashes:
+        raise ValueError(f"generated chain uses names the step needs: {clashes}")
+    constants = chain_constants(chain, dof)
+    # Output entries the chain writes as literals are constants too.
+    for index, token in enumerate(tokens):
+        value = _literal(token)
+        if value is not None:
+            constants.setdefault(index, value)
+    pose = [constants[k] if k in constants else tokens[k] for k in range(12)]
+    lines = [header, f"    {', '.join(f'Q{j}' for j in range(dof))}, = q"]
+    lines += chain_lines
+    lines.append("    (G0, G1, G2, GX), (G3, G4, G5, GY), (G6, G7, G8, GZ) = g[0], g[1], g[2]")
+    # E = R_goal · Rᵀ: entry (i, j) = goal row i · current row j.
+    goal = [["G0", "G1", "G2"], ["G3", "G4", "G5"], ["G6", "G7", "G8"]]
+    current = [[pose[0], pose[1], pose[2]], [pose[4], pose[5], pose[6]], [pose[8], pose[9], pose[10]]]
+    for i in range(3):
+        for j in range(3):
+            lines.append(f"    M{i}{j} = " + _sum([_product(goal[i][k], current[j][k]) for k in range(3)]))
+    lines += _ROTVEC.rstrip("\n").split("\n")
+    for axis, (goal_name, index) in enumerate((("GX", 3), ("GY", 7), ("GZ", 11))):
+        lines.append(f"    E{3 + axis} = " + _sum([goal_name, _product(-1.0, pose[index])]))
+    return lines, tokens, constants
+
+
 def step_source(
     chain: Callable,
     dof: int,
@@ -108,30 +145,8 @@ def step_source(
     when compiling) or None (see the module docstring). ``lower``/``upper`` None skip the
     position-limit check, ``inverse_velocity_limits`` None the velocity scaling.
     """
-    chain_lines, tokens = _split_chain_source(chain.source)
-    constants = chain_constants(chain, dof)
-    # Output entries the chain writes as literals are constants too.
-    for index, token in enumerate(tokens):
-        value = _literal(token)
-        if value is not None:
-            constants.setdefault(index, value)
     n, m = dof, len(rows)
-    pose = [constants[k] if k in constants else tokens[k] for k in range(12)]
-    lines = ["def step(q, g, f, dt):"]
-    lines.append(f"    {', '.join(f'Q{j}' for j in range(n))}, = q")
-    lines += chain_lines
-    lines.append("    (G0, G1, G2, GX), (G3, G4, G5, GY), (G6, G7, G8, GZ) = g[0], g[1], g[2]")
-    # E = R_goal · Rᵀ: entry (i, j) = goal row i · current row j.
-    from manip_kin.unrolled_linalg import _product, _sum
-
-    goal = [["G0", "G1", "G2"], ["G3", "G4", "G5"], ["G6", "G7", "G8"]]
-    current = [[pose[0], pose[1], pose[2]], [pose[4], pose[5], pose[6]], [pose[8], pose[9], pose[10]]]
-    for i in range(3):
-        for j in range(3):
-            lines.append(f"    M{i}{j} = " + _sum([_product(goal[i][k], current[j][k]) for k in range(3)]))
-    lines += _ROTVEC.rstrip("\n").split("\n")
-    for axis, (goal_name, index) in enumerate((("GX", 3), ("GY", 7), ("GZ", 11))):
-        lines.append(f"    E{3 + axis} = " + _sum([goal_name, _product(-1.0, pose[index])]))
+    lines, tokens, constants = _chain_and_error_lines("def step(q, g, f, dt):", chain, dof)
     lines.append("    F0, F1, F2, F3, F4, F5 = f")
     for i, r in enumerate(rows):
         gain = gain_angular if r < 3 else gain_linear
@@ -181,9 +196,6 @@ def step_source(
         "manipulability=sqrt(DET), damping=0.0, velocity_scale=S, limited_joints=(), singular=False)"
     )
     lines.append("    return OUT")
-    clashes = sorted(name for name in _assigned_names(chain_lines) if _STEP_NAMES.match(name))
-    if clashes:
-        raise ValueError(f"generated chain uses names the step needs: {clashes}")
     return "\n".join(lines) + "\n"
 
 
@@ -225,4 +237,111 @@ def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: t
     function = namespace["step"]
     function.source = source
     _CACHE[key] = (chain, function)
+    return function
+
+
+def ik_iteration_source(
+    chain: Callable, dof: int, rows: Sequence[int], lower: Sequence[float], upper: Sequence[float], wraps: Sequence[bool]
+) -> str:
+    """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`).
+
+    ``iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position)`` with
+    ``q`` (n floats) and the target rows ``g`` evaluates the task error ``e`` at ``q`` and
+    returns ``(status, q_next, orientation_error, position_error)``:
+
+    * status 1: the errors are below the tolerances (``q_next`` is ``q``);
+    * status 2: a non-finite error or a singular system: run the general path instead;
+    * status 0: ``q_next = q + step·Δq`` with ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e``,
+      ``λ² = weight·|e|² + shift``, brought back within the limits.
+
+    A joint at a limit whose gradient ``(Jᵀe)_j`` points outside is held: its column is
+    zeroed so the other joints take the task. Other joints stepping past a limit are clipped
+    onto it, or wrapped by whole turns when their range spans a full turn (``wraps``).
+    """
+    n, m = dof, len(rows)
+    lines, tokens, constants = _chain_and_error_lines(
+        "def iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position):", chain, dof
+    )
+    clipped = [j for j in range(n) if not wraps[j] and not (math.isinf(lower[j]) and math.isinf(upper[j]))]
+    for i, r in enumerate(rows):
+        lines.append(f"    b{i} = E{r}")
+    orientation = [i for i, r in enumerate(rows) if r < 3]
+    position = [i for i, r in enumerate(rows) if r >= 3]
+    lines.append("    O = " + (f"sqrt({' + '.join(f'b{i}*b{i}' for i in orientation)})" if orientation else "0.0"))
+    lines.append("    P = " + (f"sqrt({' + '.join(f'b{i}*b{i}' for i in position)})" if position else "0.0"))
+    lines.append("    if O < tolerance_orientation and P < tolerance_position:")
+    lines.append("        return 1, q, O, P")
+    lines.append("    W = O + P")
+    lines.append("    if W - W != 0.0:")
+    lines.append("        return 2, q, O, P")
+    lines.append("    d = weight * (O * O + P * P) + shift")
+    # The columns of joints that can be held are locals (even their constant entries), so
+    # that they can be zeroed.
+    entries = jacobian_entries(n, rows, tokens, constants)
+    held_columns: dict[int, list[str]] = {}
+    for j in clipped:
+        held_columns[j] = []
+        for i in range(m):
+            value = entries[i, j]
+            if value == 0.0:
+                continue  # a constant zero stays zero when the column is zeroed
+            lines.append(f"    J{i}_{j} = {value if isinstance(value, str) else repr(value)}")
+            entries[i, j] = f"J{i}_{j}"
+            held_columns[j].append(f"J{i}_{j}")
+    for j in clipped:
+        if not held_columns[j]:
+            continue  # the joint does not move the task at all
+        gradient = _sum([_product(entries[i, j], f"b{i}") for i in range(m)])
+        column = " = ".join(held_columns[j])
+        conditions = []
+        if not math.isinf(lower[j]):
+            conditions.append(f"(Q{j} <= {float(lower[j])!r} and {gradient} < 0.0)")
+        if not math.isinf(upper[j]):
+            conditions.append(f"(Q{j} >= {float(upper[j])!r} and {gradient} > 0.0)")
+        lines.append(f"    if {' or '.join(conditions)}:")
+        lines.append(f"        {column} = 0.0")
+    body, qdot = damped_solve_lines(entries, m, n)
+    lines += [line.replace("return None", "return 2, q, O, P") for line in body]
+    for j in range(n):
+        lines.append(f"    N{j} = Q{j} + step * ({qdot[j]})")
+        low, high = float(lower[j]), float(upper[j])
+        if math.isinf(low) and math.isinf(high):
+            continue
+        if wraps[j]:
+            lines.append(f"    if N{j} < {low!r}:")
+            lines.append(f"        N{j} += TWO_PI * ceil(({low!r} - N{j}) / TWO_PI)")
+            lines.append(f"    elif N{j} > {high!r}:")
+            lines.append(f"        N{j} -= TWO_PI * ceil((N{j} - {high!r}) / TWO_PI)")
+        else:
+            if not math.isinf(low):
+                lines.append(f"    if N{j} < {low!r}:")
+                lines.append(f"        N{j} = {low!r}")
+            if not math.isinf(high):
+                lines.append(f"    if N{j} > {high!r}:")
+                lines.append(f"        N{j} = {high!r}")
+    lines.append(f"    return 0, [{', '.join(f'N{j}' for j in range(n))}], O, P")
+    return "\n".join(lines) + "\n"
+
+
+def compile_ik_iteration(
+    chain: Callable, dof: int, rows: Sequence[int], lower: Sequence[float], upper: Sequence[float], wraps: Sequence[bool]
+) -> Callable | None:
+    """Compile :func:`ik_iteration_source`; None when the chain cannot be fused."""
+    if not isinstance(getattr(chain, "source", None), str):
+        return None
+    try:
+        source = ik_iteration_source(chain, dof, rows, lower, upper, wraps)
+    except ValueError:
+        return None
+    namespace: dict = {
+        "sqrt": math.sqrt,
+        "atan2": math.atan2,
+        "cos": math.cos,
+        "sin": math.sin,
+        "ceil": math.ceil,
+        "TWO_PI": 2.0 * math.pi,
+    }
+    exec(compile(source, "<manip_kin ik iteration>", "exec"), namespace)  # noqa: S102 - our own source
+    function = namespace["iterate"]
+    function.source = source
     return function

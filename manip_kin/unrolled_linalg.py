@@ -42,6 +42,18 @@ def _cholesky_body(m: int, shifted: bool = True) -> list[str]:
     return lines
 
 
+def _inverse_trace_lines(m: int) -> list[str]:
+    """Lines computing ``inverse_trace = tr((A + dI)⁻¹) = |L⁻¹|_F²`` after :func:`_cholesky_body`
+    (column j of L⁻¹ by forward substitution of e_j)."""
+    lines = []
+    for j in range(m):
+        lines.append(f"    w{j}_{j} = r{j}")
+        for i in range(j + 1, m):
+            lines.append(f"    w{i}_{j} = -(" + " + ".join(f"l{i}_{k}*w{k}_{j}" for k in range(j, i)) + f") * r{i}")
+    lines.append("    inverse_trace = " + " + ".join(f"w{i}_{j}*w{i}_{j}" for j in range(m) for i in range(j, m)))
+    return lines
+
+
 def _determinant_and_trace(m: int, shifted: bool = True) -> str:
     trace = " + ".join(f"a{j}_{j}" for j in range(m)) + (f" + {m}*d" if shifted else "")
     return "*".join(f"p{j}" for j in range(m)) + ", " + trace
@@ -119,6 +131,17 @@ def _negate(token: str) -> str:
     return token[1:] if token.startswith("-") else f"-{token}"
 
 
+_CONSTANTS_CACHE: dict[int, tuple[Callable, dict[int, float]]] = {}
+
+
+def _constants_of(chain: Callable, dof: int) -> dict[int, float]:
+    cached = _CONSTANTS_CACHE.get(id(chain))
+    if cached is None or cached[0] is not chain:
+        cached = (chain, chain_constants(chain, dof))
+        _CONSTANTS_CACHE[id(chain)] = cached
+    return cached[1]
+
+
 def _product(a: float | str, b: float | str) -> float | str:
     """``a * b`` as a constant or an expression; names may carry a leading minus."""
     if isinstance(a, float) and isinstance(b, float):
@@ -185,20 +208,39 @@ def damped_solve_lines(
     return lines, qdot
 
 
-def _damped_solve_source(dof: int, rows: Sequence[int], constants: dict[int, float], offset: int) -> str:
+def _damped_solve_source(
+    dof: int, rows: Sequence[int], constants: dict[int, float], offset: int, excluded: Sequence[int], inverse_trace: bool
+) -> str:
     n, m = dof, len(rows)
+    # Excluded columns are constant zeros: J without them, and zero rates for them.
+    constants = dict(constants)
+    for i, r in enumerate(rows):
+        for j in excluded:
+            constants[offset + r * n + j] = 0.0
     entries = jacobian_entries(dof, rows, None, constants, offset)
-    unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n)}
+    unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n) if j not in excluded}
     lines = ["def solve(values, b, d):"]
     lines.append("    " + ", ".join(unpacked.get(k, "_") for k in range(offset + 6 * n)) + ", = values")
     lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
     body, qdot = damped_solve_lines(entries, m, n)
     lines += body
-    lines.append(f"    return [{', '.join(qdot)}], {_determinant_and_trace(m)}")
+    if inverse_trace:
+        lines += _inverse_trace_lines(m)
+        lines.append(f"    return [{', '.join(qdot)}], {_determinant_and_trace(m)}, inverse_trace")
+    else:
+        lines.append(f"    return [{', '.join(qdot)}], {_determinant_and_trace(m)}")
     return "\n".join(lines) + "\n"
 
 
-def damped_solver(chain: Callable, dof: int, rows: Sequence[int], offset: int = 16) -> Callable:
+def damped_solver(
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    offset: int = 16,
+    excluded: Sequence[int] = (),
+    inverse_trace: bool = False,
+    fold_constants: bool = True,
+) -> Callable:
     """The damped least-squares step ``q̇ = Jᵀ (J Jᵀ + d I)⁻¹ b``, unrolled for one chain.
 
     ``J`` is read straight from the flat tuple a generated chain returns (the task ``rows``
@@ -211,19 +253,29 @@ def damped_solver(chain: Callable, dof: int, rows: Sequence[int], offset: int = 
         dof: number of joints n.
         rows: task rows, indices into ``[ωx, ωy, ωz, vx, vy, vz]``.
         offset: index of the Jacobian's first entry in the chain's output.
+        excluded: joints whose columns are left out (joints held at a limit): the system is
+            solved over the others and their rates are 0.
+        inverse_trace: also return ``tr((J Jᵀ + dI)⁻¹)``, whose inverse is a lower bound of
+            the smallest eigenvalue within a factor m (tighter than
+            :func:`smallest_eigenvalue_bound` when the eigenvalues are spread).
+        fold_constants: fold the chain's constant Jacobian entries into the code. Without it
+            every entry is read from ``values``, so a caller may zero any column there (a
+            joint held at a limit) and use one solver for every subset of held joints.
 
     Returns:
-        ``solve(values, b, d)`` -> ``(qdot, determinant, trace)`` or None, where ``values`` is
-        the chain's output, ``b`` the ``len(rows)`` task-space values, ``d`` = λ² >= 0;
-        ``determinant`` and ``trace`` are those of ``J Jᵀ + dI`` as in :func:`cholesky_solver`,
-        which also explains the None.
+        ``solve(values, b, d)`` -> ``(qdot, determinant, trace)`` (plus ``inverse_trace``) or
+        None, where ``values`` is the chain's output, ``b`` the ``len(rows)`` task-space
+        values, ``d`` = λ² >= 0; ``determinant`` and ``trace`` are those of ``J Jᵀ + dI`` as in
+        :func:`cholesky_solver`, which also explains the None.
     """
     rows = tuple(int(r) for r in rows)
-    key = (id(chain), dof, rows, offset)
+    excluded = tuple(sorted(int(j) for j in excluded))
+    key = (id(chain), dof, rows, offset, excluded, inverse_trace, fold_constants)
     cached = _DAMPED_CACHE.get(key)
     if cached is not None and cached[0] is chain:
         return cached[1]
-    source = _damped_solve_source(dof, rows, chain_constants(chain, dof), offset)
+    constants = _constants_of(chain, dof) if fold_constants else {}
+    source = _damped_solve_source(dof, rows, constants, offset, excluded, inverse_trace)
     namespace: dict = {"sqrt": math.sqrt}
     exec(compile(source, "<manip_kin damped solve>", "exec"), namespace)  # noqa: S102 - our own source
     solver = namespace["solve"]
