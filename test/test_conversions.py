@@ -134,3 +134,77 @@ def test_to_double_array_accepts_non_contiguous():
     msg = JointState()
     msg.position = conv.to_double_array(values)
     assert list(msg.position) == [0.0, 2.0, 4.0, 6.0, 8.0]
+
+
+# --- pre-serialised messages and byte decoders ------------------------------------------------
+
+from geometry_msgs.msg import TwistStamped as _TwistStamped  # noqa: E402
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from std_msgs.msg import MultiArrayDimension  # noqa: E402
+
+
+@pytest.mark.parametrize("frame", ["base_link", "", "abc", "frame_with_7"])
+def test_pose_and_twist_cdr_match_rclpy(frame):
+    matrix = _pose()
+    stamp_ns = 1_234_567_890_123
+    expected = conv.make_pose_stamped(matrix, frame, conv.ns_to_stamp(stamp_ns))
+    data = conv.PoseStampedCdr(frame).encode(stamp_ns, matrix)
+    assert len(data) == len(serialize_message(expected))
+    assert deserialize_message(data, PoseStamped) == expected
+    angular, linear = np.array([0.1, -0.2, 0.3]), np.array([1.0, 2.0, -3.0])
+    twist = conv.TwistStampedCdr(frame).encode(99, angular, linear)
+    assert deserialize_message(twist, _TwistStamped) == conv.make_twist_stamped(angular, linear, frame, conv.ns_to_stamp(99))
+
+
+@pytest.mark.parametrize("names", [["j1", "joint_2", "a"], [], ["abcde"] * 7])
+def test_joint_state_and_command_cdr_match_rclpy(names):
+    position, velocity = np.arange(len(names)) * 1.5, -np.arange(len(names)) * 0.25
+    data = conv.JointStateCdr(names).encode(5_000_000_001, position, velocity)
+    assert deserialize_message(data, JointState) == conv.make_joint_state(names, position, velocity, conv.ns_to_stamp(5_000_000_001))
+    values = np.arange(len(names)) * 0.5
+    command = conv.Float64ArrayCdr(len(names)).encode(values)
+    assert deserialize_message(command, Float64MultiArray) == conv.array_to_multiarray(values)
+    np.testing.assert_array_equal(conv.decode_float64_array(command), values)
+
+
+def test_decode_float64_array_with_layout_falls_back():
+    msg = Float64MultiArray(data=[1.0, 2.0])
+    msg.layout.dim = [MultiArrayDimension(label="joints", size=2, stride=2)]
+    np.testing.assert_array_equal(conv.decode_float64_array(serialize_message(msg)), [1.0, 2.0])
+
+
+def test_joint_state_decoder_fast_path_and_fallbacks():
+    names = ["joint1", "j2", "joint_three"]
+    decoder = conv.JointStateDecoder(names)
+    first = serialize_message(conv.make_joint_state(names, [1.0, 2.0, 3.0], [0.0, 0.0, 0.0]))
+    np.testing.assert_array_equal(decoder.positions(first), [1.0, 2.0, 3.0])
+    assert decoder._blob is not None  # learned the layout
+    fast = serialize_message(conv.make_joint_state(names, [4.0, 5.0, 6.0]))
+    np.testing.assert_array_equal(decoder.positions(fast), [4.0, 5.0, 6.0])
+    # Other order and an extra joint: matched by name through the slow path.
+    other = serialize_message(conv.make_joint_state(["j2", "extra", "joint_three", "joint1"], [2.0, 9.0, 3.0, 1.0]))
+    np.testing.assert_array_equal(decoder.positions(other), [1.0, 2.0, 3.0])
+    framed = conv.make_joint_state(names, [7.0, 8.0, 9.0])
+    framed.header.frame_id = "base_link"  # different bytes before the names: not the fast path
+    np.testing.assert_array_equal(decoder.positions(serialize_message(framed)), [7.0, 8.0, 9.0])
+    with pytest.raises(conv.InvalidMessageError, match="NaN"):
+        decoder.positions(serialize_message(conv.make_joint_state(names, [1.0, math.inf, 3.0])))
+    with pytest.raises(conv.InvalidMessageError, match="lacks joints"):
+        decoder.positions(serialize_message(conv.make_joint_state(names[:2], [1.0, 2.0])))
+    with pytest.raises(conv.InvalidMessageError, match="3 names but 2 positions"):
+        decoder.positions(serialize_message(conv.make_joint_state(names, [1.0, 2.0])))
+
+
+def test_problem_kind():
+    assert conv.problem_kind("goal frame_id 'x' is not the base frame") == "frame"
+    assert conv.problem_kind("contains NaN or infinity") == "finite"
+    assert conv.problem_kind("quaternion (0, 0, 0, 2) has length 2") == "quaternion"
+    assert conv.problem_kind("has 5 values; valid: 6") == "length"
+
+
+def test_diagnostic_helpers():
+    status = conv.make_diagnostic_status("n", "warn", "tracking", "genova7", [("a", 1), ("b", "x")])
+    assert status.level == b"\x01" and status.message == "tracking" and status.hardware_id == "genova7"
+    assert conv.diagnostic_values(status) == {"a": "1", "b": "x"}
+    array_msg = conv.make_diagnostic_array(Time(sec=3), [status])
+    assert array_msg.header.stamp.sec == 3 and array_msg.status[0].name == "n"

@@ -1,0 +1,88 @@
+"""Node plumbing without ROS traffic: the rate loop, log throttling, parameter checks, --help."""
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from manip_kin.errors import InvalidArgumentError
+from manip_kin.nodes.params import ParamSpec
+from manip_kin.nodes.rate_loop import RateLoop, ThrottledLog
+
+
+def test_rate_loop_runs_at_rate_survives_errors_and_stops():
+    calls = []
+    errors = []
+
+    def cycle(now_ns):
+        calls.append(now_ns)
+        if len(calls) == 5:
+            raise RuntimeError("boom")
+
+    loop = RateLoop(200.0, cycle, errors.append, name="test_loop")
+    loop.start()
+    time.sleep(0.5)
+    loop.stop()
+    assert not loop.running
+    count = len(calls)
+    time.sleep(0.05)
+    assert len(calls) == count  # stopped
+    assert 60 <= count <= 110  # ~100 cycles in 0.5 s at 200 Hz, on a shared machine
+    assert len(errors) == 1 and str(errors[0]) == "boom"
+    stats = loop.stats()
+    assert stats.errors == 1 and stats.cycles == count - 1
+    assert 150 < stats.rate_hz < 210
+    assert stats.period_error_p99_ms >= 0 and stats.compute_mean_ms >= 0
+    with pytest.raises(ValueError):
+        RateLoop(0.0, cycle)
+
+
+def test_throttled_log_keys_on_kind():
+    lines = []
+    log = ThrottledLog(lines.append, interval=0.2)
+    for _ in range(3):
+        log("length", "bad length")
+        log("finite", "bad value")
+    assert lines == ["bad length", "bad value"]
+    time.sleep(0.25)
+    log("length", "bad length")
+    assert lines[-1] == "bad length (2 more like this since the last report)"
+
+
+def test_param_spec_coercion():
+    rate = ParamSpec("rate_hz", "float", 500.0, "rate", "Hz", positive=True)
+    assert rate.coerce(1000) == 1000.0 and isinstance(rate.coerce(1000), float)
+    with pytest.raises(InvalidArgumentError, match="valid: > 0 Hz"):
+        rate.coerce(0)
+    with pytest.raises(InvalidArgumentError, match="wrong type"):
+        rate.coerce("fast")
+    with pytest.raises(InvalidArgumentError, match="wrong type"):
+        rate.coerce(True)
+    positions = ParamSpec("initial_positions", "float_list", None, "q")
+    assert positions.coerce([0, 1, 2]) == [0.0, 1.0, 2.0] and positions.coerce(None) is None
+    with pytest.raises(InvalidArgumentError, match="NaN"):
+        positions.coerce([float("nan")])
+    scaling = ParamSpec("time_scaling", "str", "cubic", "s", choices=("cubic", "quintic"))
+    with pytest.raises(InvalidArgumentError, match="valid: cubic, quintic"):
+        scaling.coerce("linear")
+    assert "rate_hz (default 500.0) [Hz]" in rate.help_line()
+
+
+@pytest.mark.parametrize("executable", ["robot_state", "cartesian_controller", "trajectory_generator"])
+def test_help_lists_parameters_topics_and_example(executable):
+    path = Path(sys.executable).parent / executable
+    result = subprocess.run([str(path), "--help"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0
+    text = result.stdout
+    assert "rate_hz (default 500.0) [Hz]" in text and "robot (default 'genova7')" in text
+    assert "--ros-args -p robot:=" in text and "Subscribes:" in text and "Publishes:" in text
+
+
+def test_bad_parameter_exits_2_with_one_line():
+    path = Path(sys.executable).parent / "robot_state"
+    result = subprocess.run([str(path), "--ros-args", "-p", "robot:=nosuchbot"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "nosuchbot" in errors[0]
