@@ -17,6 +17,7 @@ from manip_kin.errors import ManipKinError
 # Order is the order of `manip_kin --help`.
 COMMAND_MODULES = (
     "manip_kin.cli.model_commands",
+    "manip_kin.cli.motion_commands",
     "manip_kin.cli.ros_commands",
     "manip_kin.cli.recording_commands",
 )
