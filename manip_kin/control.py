@@ -257,7 +257,7 @@ class CartesianController:
         self._n = n
         self._rows = rows
         self._chain = compiled_kinematics(model, self.frame_index, True)
-        self._fast_solve = damped_solver(self._chain, n, rows)
+        self._fast_solve = damped_solver(self._chain, n, rows, inverse_trace=True)
         self._fused_step = compile_step(
             self._chain,
             n,
@@ -286,6 +286,14 @@ class CartesianController:
     def _task_jacobian(self, values: Sequence[float]) -> np.ndarray:
         """The task rows of the Jacobian in a chain output, shape (m, n)."""
         return np.array(values[16:]).reshape(6, self._n)[list(self._rows)]
+
+    def _certified(self, result: tuple, size: int) -> bool:
+        """True when a solve's ``(x, det, tr, tr⁻¹)`` proves σ_min >= ε (so λ = 0) without
+        eigenvalues: λ_min >= det·((m-1)/tr)^(m-1) and λ_min >= 1/tr((JJᵀ)⁻¹)."""
+        _, determinant, trace, inverse_trace = result
+        if smallest_eigenvalue_bound(determinant, trace, size) >= self._epsilon_sq:
+            return True
+        return inverse_trace * self._epsilon_sq <= 1.0
 
     def _damping_for(self, gram: np.ndarray) -> tuple[float, float, float]:
         """``(σ_min, λ², manipulability)`` of a Gram matrix ``J Jᵀ``, from its eigenvalues."""
@@ -318,7 +326,7 @@ class CartesianController:
         gram = jacobian @ jacobian.T
         gram_rows = gram.tolist()
         result = self._solve(gram_rows, rhs, 0.0)
-        if result is not None and smallest_eigenvalue_bound(result[1], result[2], len(rhs)) >= self._epsilon_sq:
+        if result is not None and self._certified(result, len(rhs)):
             return np.dot(result[0], jacobian).tolist(), 0.0, False
         sigma_min, damping_sq, _ = self._damping_for(gram)
         if sigma_min >= self.config.singular_threshold and result is not None:
@@ -387,8 +395,7 @@ class CartesianController:
             raise NonFiniteError("the goal pose or the goal twist")
 
         result = self._fast_solve(values, rhs, 0.0)
-        # σ_min² = λ_min(JJᵀ) >= det · ((m-1)/tr)^(m-1): when that clears ε², no damping is due.
-        if result is not None and smallest_eigenvalue_bound(result[1], result[2], len(rhs)) >= self._epsilon_sq:
+        if result is not None and self._certified(result, len(rhs)):
             qdot, damping, singular, manipulability = result[0], 0.0, False, math.sqrt(result[1])
         else:
             qdot, damping, singular, manipulability = self._solve_near_singular(values, rhs, result)

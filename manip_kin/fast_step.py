@@ -29,6 +29,7 @@ import numpy as np
 from manip_kin.unrolled_linalg import (
     _cholesky_body,
     _determinant_and_trace,
+    _inverse_trace_lines,
     _product,
     _sum,
     chain_constants,
@@ -160,11 +161,16 @@ def step_source(
     body, qdot = damped_solve_lines(entries, m, n, shifted=False)
     lines += body
     lines.append(f"    DET, TR = {_determinant_and_trace(m, shifted=False)}")
+    # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) when the eigenvalues
+    # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops).
     if m > 1:
         lines.append(f"    if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
+        lines += ["    " + line for line in _inverse_trace_lines(m)]
+        lines.append(f"        if inverse_trace * {epsilon_sq!r} > 1.0:")
+        lines.append("            return None")
     else:
         lines.append(f"    if DET < {epsilon_sq!r}:")
-    lines.append("        return None")
+        lines.append("        return None")
     for j in range(n):
         lines.append(f"    QD{j} = {qdot[j]}")
     if lower is not None and upper is not None:

@@ -81,7 +81,8 @@ def _cholesky_source(m: int) -> str:
         lines.append(f"    {', '.join(f'a{i}_{j}' for j in range(m))}, = a{i}")
     lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
     lines += _cholesky_body(m)
-    lines.append(f"    return [{', '.join(f'x{i}' for i in range(m))}], {_determinant_and_trace(m)}")
+    lines += _inverse_trace_lines(m)
+    lines.append(f"    return [{', '.join(f'x{i}' for i in range(m))}], {_determinant_and_trace(m)}, inverse_trace")
     return "\n".join(lines) + "\n"
 
 
@@ -90,9 +91,10 @@ def cholesky_solver(size: int) -> Callable:
 
     The returned ``solve(a, b, d)`` takes ``a`` as ``size`` rows of ``size`` floats (what
     ``ndarray.tolist()`` gives), ``b`` as ``size`` floats and the diagonal shift ``d``
-    (λ², >= 0). It returns ``(x, determinant, trace)``: the solution as a list of ``size``
-    floats, ``det(A + dI)`` and ``tr(A + dI)`` (together a cheap lower bound of the smallest
-    eigenvalue, :func:`smallest_eigenvalue_bound`).
+    (λ², >= 0). It returns ``(x, determinant, trace, inverse_trace)``: the solution as a list
+    of ``size`` floats, ``det(A + dI)`` and ``tr(A + dI)`` (together a cheap lower bound of
+    the smallest eigenvalue, :func:`smallest_eigenvalue_bound`) and ``tr((A + dI)⁻¹)``
+    (``1 / inverse_trace`` is another lower bound, within a factor ``size`` of it).
 
     It returns None when a pivot is not positive: ``A + dI`` is singular (or indefinite, or
     holds NaN) to working precision.
