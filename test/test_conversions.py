@@ -208,3 +208,26 @@ def test_diagnostic_helpers():
     assert conv.diagnostic_values(status) == {"a": "1", "b": "x"}
     array_msg = conv.make_diagnostic_array(Time(sec=3), [status])
     assert array_msg.header.stamp.sec == 3 and array_msg.status[0].name == "n"
+
+
+def test_encode_values_paths_match_array_paths():
+    from manip_kin.rotations import matrix_to_quat
+
+    rng = np.random.default_rng(3)
+    encoder = conv.PoseStampedCdr("base_link")
+    for _ in range(200):
+        rpy = rng.uniform(-math.pi, math.pi, 3)
+        rpy[1] /= 2
+        matrix = _pose(tuple(rpy), tuple(rng.normal(size=3)))
+        values = matrix.reshape(-1).tolist()
+        np.testing.assert_allclose(conv.quaternion_of_pose_values(values), matrix_to_quat(matrix[:3, :3]), atol=1e-12)
+        decoded = deserialize_message(encoder.encode_values(7, values), PoseStamped)
+        assert decoded.header.stamp.nanosec == 7 and decoded.header.frame_id == "base_link"
+        np.testing.assert_allclose(conv.pose_stamped_to_matrix(decoded), matrix, atol=1e-12)
+    for special in (np.eye(3), rpy_to_matrix(math.pi, 0, 0), rpy_to_matrix(0, math.pi, 0), rpy_to_matrix(0, 0, math.pi)):
+        values = make_transform(special, [0, 0, 0]).reshape(-1).tolist()
+        np.testing.assert_allclose(conv.quaternion_of_pose_values(values), matrix_to_quat(special), atol=1e-12)
+    twist = conv.TwistStampedCdr("base_link")
+    assert twist.encode_values(5, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]) == twist.encode(5, np.array([1.0, 2.0, 3.0]), np.array([4.0, 5.0, 6.0]))
+    joints = conv.JointStateCdr(["a", "b"])
+    assert joints.encode_values(5, [1.0, 2.0], [3.0, 4.0]) == joints.encode(5, np.array([1.0, 2.0]), np.array([3.0, 4.0]))

@@ -423,6 +423,34 @@ def _stamp_parts(stamp_ns: int) -> tuple[int, int]:
     return divmod(int(stamp_ns), _NS_PER_S)
 
 
+def quaternion_of_pose_values(values) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)``, ``w >= 0``, of the rotation in a row-major 4x4 pose.
+
+    Plain-float Shepperd method (the same as :func:`manip_kin.rotations.matrix_to_quat`)
+    for the loops, where a numpy round trip costs more than the arithmetic.
+    """
+    m00, m01, m02 = values[0], values[1], values[2]
+    m10, m11, m12 = values[4], values[5], values[6]
+    m20, m21, m22 = values[8], values[9], values[10]
+    trace = m00 + m11 + m22
+    if trace >= m00 and trace >= m11 and trace >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
+        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
+    elif m00 >= m11 and m00 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
+        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
+    elif m11 >= m22:
+        s = 2.0 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
+        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
+    else:
+        s = 2.0 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
+        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    return x / norm, y / norm, z / norm, w / norm
+
+
 class PoseStampedCdr:
     """Serialised ``geometry_msgs/PoseStamped`` with a fixed frame id.
 
@@ -444,6 +472,14 @@ class PoseStampedCdr:
         x, y, z = matrix[:3, 3].tolist()
         return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, x, y, z, qx, qy, qz, qw)
 
+    def encode_values(self, stamp_ns: int, values) -> bytes:
+        """CDR bytes of a pose given as 16 row-major floats (the unrolled kinematics' output)."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        qx, qy, qz, qw = quaternion_of_pose_values(values)
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, values[3], values[7], values[11], qx, qy, qz, qw
+        )
+
 
 class TwistStampedCdr:
     """Serialised ``geometry_msgs/TwistStamped`` with a fixed frame id."""
@@ -461,6 +497,12 @@ class TwistStampedCdr:
         return self._struct.pack(
             _CDR_LE, sec, nanosec, self._frame_length, self._frame, *linear.tolist(), *angular.tolist()
         )
+
+    def encode_values(self, stamp_ns: int, twist) -> bytes:
+        """CDR bytes of a twist given as 6 floats ``(wx, wy, wz, vx, vy, vz)``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        wx, wy, wz, vx, vy, vz = twist
+        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, vx, vy, vz, wx, wy, wz)
 
 
 class JointStateCdr:
@@ -496,6 +538,14 @@ class JointStateCdr:
         return self._struct.pack(
             _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names,
             n, *position.tolist(), n, *velocity.tolist(), 0,
+        )
+
+    def encode_values(self, stamp_ns: int, position, velocity) -> bytes:
+        """CDR bytes of positions and velocities given as float sequences of length n."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        n = self._count
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names, n, *position, n, *velocity, 0
         )
 
 

@@ -9,6 +9,7 @@ and publishes ``/joint_states``, ``/ee_pose``, ``/tool_pose``, ``/ee_twist`` and
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -19,7 +20,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.kinematics import pose_and_jacobian_in_base
+from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
@@ -69,67 +70,120 @@ USAGE = usage_text(
 
 
 class JointIntegrator:
-    """Joint positions integrated from velocity commands within the limits (plain numpy).
+    """Joint positions integrated from velocity commands within the limits (plain Python floats).
+
+    The cycle runs on float lists and the model's unrolled kinematics: at this size a
+    numpy call costs more than the arithmetic it saves. Arrays are offered as properties
+    for callers outside the loop.
 
     Args:
         model: the robot.
         q0: start positions, shape (n,), inside the limits.
 
     Attributes:
-        q: current positions [rad | m], shape (n,).
-        qdot: velocity of the last step [rad/s | m/s], shape (n,): the commanded rate after
-            limiting, zero for a joint stopped at a position limit.
-        ee: end-effector pose in base at ``q``, shape (4, 4).
-        tool: tool pose in base at ``q`` (the end effector when there is no tool), shape (4, 4).
-        ee_twist, tool_twist: ``(angular [rad/s], linear [m/s])`` w.r.t. base in base at the last step.
-        at_limit: joints on a position limit after the last step, shape (n,) bool.
+        q_values: current positions [rad | m], n floats.
+        qdot_values: velocity of the last step [rad/s | m/s], n floats: the commanded rate
+            after limiting, zero for a joint stopped at a position limit.
+        ee_values, tool_values: end-effector and tool poses in base, 16 row-major floats.
+        ee_twist_values, tool_twist_values: ``(wx, wy, wz, vx, vy, vz)`` w.r.t. base in base
+            [rad/s, m/s].
         velocity_scale: factor (<= 1) the last command was scaled by to respect the velocity limits.
     """
 
     def __init__(self, model: RobotModel, q0: np.ndarray):
         self.model = model
-        self.q = np.array(q0, dtype=float)
-        self.qdot = np.zeros(model.dof)
-        self._ee_index = model.dof + 1
-        self._tool = model.tool
-        self._inverse_velocity_limits = 1.0 / model.velocity_limits
-        self.at_limit = np.zeros(model.dof, dtype=bool)
+        n = model.dof
+        self._n = n
+        self.q_values = [float(v) for v in q0]
+        self.qdot_values = [0.0] * n
+        self._lower = model.lower.tolist()
+        self._upper = model.upper.tolist()
+        self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
+        self._tool_chain = compiled_kinematics(model, model.frame_index(model.default_frame), True)
+        self._ee_chain = compiled_kinematics(model, model.dof + 1, False) if model.has_tool else None
         self.velocity_scale = 1.0
-        self.ee = np.eye(4)
-        self.tool = np.eye(4)
-        self.ee_twist = (np.zeros(3), np.zeros(3))
-        self.tool_twist = (np.zeros(3), np.zeros(3))
         self._update_kinematics()
 
     def step(self, command: np.ndarray | None, dt: float) -> None:
         """Advance by ``dt`` seconds with joint rates ``command`` (None: zero), shape (n,)."""
-        model = self.model
+        n = self._n
         if command is None or dt <= 0.0:
-            self.qdot[:] = 0.0
+            if self.velocity_scale == 1.0 and not any(self.qdot_values):
+                return  # at rest and still at rest: poses unchanged, twists zero
+            self.qdot_values = [0.0] * n
             self.velocity_scale = 1.0
         else:
+            rates = command.tolist()
+            inverse = self._inverse_velocity_limits
             # Scale the whole vector (not joint by joint) so the Cartesian direction holds.
-            peak = float(np.max(np.abs(command) * self._inverse_velocity_limits))
-            self.velocity_scale = 1.0 / peak if peak > 1.0 else 1.0
-            q_next = self.q + command * (self.velocity_scale * dt)
-            np.clip(q_next, model.lower, model.upper, out=q_next)
-            np.subtract(q_next, self.q, out=self.qdot)
-            self.qdot *= 1.0 / dt
-            self.q = q_next
-        np.logical_or(self.q <= model.lower, self.q >= model.upper, out=self.at_limit)
+            peak = max(abs(rates[i]) * inverse[i] for i in range(n))
+            scale = 1.0 / peak if peak > 1.0 else 1.0
+            self.velocity_scale = scale
+            step = scale * dt
+            q, lower, upper = self.q_values, self._lower, self._upper
+            q_next = [min(max(q[i] + rates[i] * step, lower[i]), upper[i]) for i in range(n)]
+            inverse_dt = 1.0 / dt
+            self.qdot_values = [(q_next[i] - q[i]) * inverse_dt for i in range(n)]
+            self.q_values = q_next
         self._update_kinematics()
 
     def _update_kinematics(self) -> None:
-        # The unrolled per-model code: pose and Jacobian in a few microseconds.
-        self.ee, jac = pose_and_jacobian_in_base(self.model, self.q, self._ee_index)
-        self.tool = self.ee @ self._tool if self._tool is not None else self.ee
-        wx, wy, wz = angular = jac[:3] @ self.qdot
-        linear = jac[3:] @ self.qdot
-        self.ee_twist = (angular, linear)
-        # Same rigid body: v_tool = v_ee + ω × (p_tool - p_ee).
-        rx, ry, rz = (self.tool[:3, 3] - self.ee[:3, 3]).tolist()
-        tool_linear = linear + np.array([wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx])
-        self.tool_twist = (angular, tool_linear)
+        n = self._n
+        values = self._tool_chain(self.q_values)
+        tool = values[:16]
+        qdot = self.qdot_values
+        # Twist of the tool (ee when no tool) = J q̇, J rows [angular; linear] after the pose.
+        twist = [sum(values[16 + r * n + c] * qdot[c] for c in range(n)) for r in range(6)]
+        self.tool_values = tool
+        self.tool_twist_values = twist
+        if self._ee_chain is None:
+            self.ee_values = tool
+            self.ee_twist_values = twist
+            return
+        ee = self._ee_chain(self.q_values)
+        self.ee_values = ee
+        # Same rigid body: v_ee = v_tool + ω × (p_ee - p_tool).
+        wx, wy, wz, vx, vy, vz = twist
+        rx, ry, rz = ee[3] - tool[3], ee[7] - tool[7], ee[11] - tool[11]
+        self.ee_twist_values = [wx, wy, wz, vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx]
+
+    # --- arrays for callers outside the loop ---------------------------------------------------
+
+    @property
+    def q(self) -> np.ndarray:
+        """Current positions, shape (n,)."""
+        return np.array(self.q_values)
+
+    @property
+    def qdot(self) -> np.ndarray:
+        """Velocity of the last step, shape (n,)."""
+        return np.array(self.qdot_values)
+
+    @property
+    def ee(self) -> np.ndarray:
+        """End-effector pose in base, shape (4, 4)."""
+        return np.array(self.ee_values).reshape(4, 4)
+
+    @property
+    def tool(self) -> np.ndarray:
+        """Tool pose in base (the end effector when there is no tool), shape (4, 4)."""
+        return np.array(self.tool_values).reshape(4, 4)
+
+    @property
+    def ee_twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(angular, linear)`` of the end effector, each shape (3,)."""
+        return np.array(self.ee_twist_values[:3]), np.array(self.ee_twist_values[3:])
+
+    @property
+    def tool_twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(angular, linear)`` of the tool, each shape (3,)."""
+        return np.array(self.tool_twist_values[:3]), np.array(self.tool_twist_values[3:])
+
+    @property
+    def at_limit(self) -> np.ndarray:
+        """Joints on a position limit, shape (n,) bool."""
+        q = self.q_values
+        return np.array([q[i] <= self._lower[i] or q[i] >= self._upper[i] for i in range(self._n)])
 
 
 def initial_positions(model: RobotModel, values) -> np.ndarray:
@@ -175,6 +229,7 @@ class RobotStateNode(Node):
         self._pose_cdr = conv.PoseStampedCdr(self.base_frame)
         self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
 
+        self._wall_clock = not self.get_parameter("use_sim_time").value
         self._command: np.ndarray | None = None
         self._command_time_ns = 0
         self._last_cycle_ns = 0
@@ -230,12 +285,13 @@ class RobotStateNode(Node):
         integrator = self.integrator
         integrator.step(command, dt)
 
-        stamp_ns = self.get_clock().now().nanoseconds
-        self._joint_state_pub.publish(self._joint_state_cdr.encode(stamp_ns, integrator.q, integrator.qdot))
-        self._ee_pose_pub.publish(self._pose_cdr.encode(stamp_ns, integrator.ee))
-        self._tool_pose_pub.publish(self._pose_cdr.encode(stamp_ns, integrator.tool))
-        self._ee_twist_pub.publish(self._twist_cdr.encode(stamp_ns, *integrator.ee_twist))
-        self._tool_twist_pub.publish(self._twist_cdr.encode(stamp_ns, *integrator.tool_twist))
+        # System time is ROS time unless use_sim_time (checked once at start).
+        stamp_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        self._joint_state_pub.publish(self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, integrator.qdot_values))
+        self._ee_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.ee_values))
+        self._tool_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.tool_values))
+        self._ee_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.ee_twist_values))
+        self._tool_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.tool_twist_values))
 
         if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
             self._last_diagnostics_ns = now_ns
