@@ -42,7 +42,7 @@ from manip_kin.model import RobotModel
 from manip_kin.fast_step import compile_step
 from manip_kin.rotations import matrix_to_rotvec
 from manip_kin.tasks import Task, parse_task
-from manip_kin.unrolled_linalg import cholesky_solver, damped_solver, smallest_eigenvalue_bound
+from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
 
 
 @dataclass(frozen=True)
@@ -238,7 +238,9 @@ def _goal_rows(goal_pose) -> list[list[float]]:
 class CartesianController:
     """Resolved-rate control of one frame towards a goal pose (see the module docstring).
 
-    Not thread-safe: it keeps preallocated buffers. Create one per control loop.
+    The controller keeps no state between steps (every step depends only on its arguments),
+    so one instance may serve several loops. Building it generates and compiles the model's
+    unrolled code (a few milliseconds, cached per model and configuration).
 
     Attributes:
         model: the robot.
@@ -257,7 +259,9 @@ class CartesianController:
         self._n = n
         self._rows = rows
         self._chain = compiled_kinematics(model, self.frame_index, True)
-        self._fast_solve = damped_solver(self._chain, n, rows, inverse_trace=True)
+        # The general path reads every Jacobian entry from the chain's output, so that the
+        # columns of joints held at a limit can be zeroed there.
+        self._solve_any = damped_solver(self._chain, n, rows, inverse_trace=True, fold_constants=False)
         self._fused_step = compile_step(
             self._chain,
             n,
@@ -270,7 +274,6 @@ class CartesianController:
             upper=model.upper.tolist() if config.respect_position_limits else None,
             inverse_velocity_limits=(1.0 / model.velocity_limits).tolist() if config.respect_velocity_limits else None,
         )
-        self._solve = cholesky_solver(len(rows))
         self._gain_angular = float(config.gain_angular)
         self._gain_linear = float(config.gain_linear)
         self._respect_position_limits = bool(config.respect_position_limits)
@@ -305,36 +308,27 @@ class CartesianController:
         damping_sq = self._damping_max_sq * max(0.0, 1.0 - sigma_min * sigma_min / self._epsilon_sq)
         return sigma_min, damping_sq, manipulability
 
-    def _solve_near_singular(self, values: Sequence[float], rhs: list, undamped) -> tuple[list, float, bool, float]:
-        """The fast path could not certify σ_min >= ε: decide the damping from the exact σ_min."""
+    def _solve_general(self, values: Sequence[float], rhs: list) -> tuple[list, float, bool, float]:
+        """``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` with λ from σ_min, J read from ``values`` (whose
+        columns of joints held at a limit may be zeroed).
+
+        Returns:
+            ``(qdot, λ, singular, manipulability)``.
+        """
+        result = self._solve_any(values, rhs, 0.0)
+        if result is not None and self._certified(result, len(rhs)):
+            return result[0], 0.0, False, math.sqrt(result[1])
+        # Possibly near a singularity: decide the damping from the exact σ_min.
         jacobian = self._task_jacobian(values)
         sigma_min, damping_sq, manipulability = self._damping_for(jacobian @ jacobian.T)
-        if sigma_min >= self.config.singular_threshold and undamped is not None:
-            return undamped[0], 0.0, False, manipulability
-        damped = self._fast_solve(values, rhs, damping_sq) if damping_sq > 0.0 else None
+        if sigma_min >= self.config.singular_threshold and result is not None:
+            return result[0], 0.0, False, manipulability
+        damped = self._solve_any(values, rhs, damping_sq) if damping_sq > 0.0 else None
         if damped is not None:
             return damped[0], math.sqrt(damping_sq), True, manipulability
-        return self._least_squares(jacobian, rhs), math.sqrt(damping_sq), True, manipulability
-
-    @staticmethod
-    def _least_squares(jacobian: np.ndarray, rhs) -> list:
         # No damping configured at an exact singularity: the minimum-norm least-squares rates.
-        return np.linalg.lstsq(jacobian, np.asarray(rhs, dtype=float), rcond=1e-12)[0].tolist()
-
-    def _solve_reduced(self, jacobian: np.ndarray, rhs: list) -> tuple[list, float, bool]:
-        """Damped ``Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` for a reduced Jacobian (some columns removed)."""
-        gram = jacobian @ jacobian.T
-        gram_rows = gram.tolist()
-        result = self._solve(gram_rows, rhs, 0.0)
-        if result is not None and self._certified(result, len(rhs)):
-            return np.dot(result[0], jacobian).tolist(), 0.0, False
-        sigma_min, damping_sq, _ = self._damping_for(gram)
-        if sigma_min >= self.config.singular_threshold and result is not None:
-            return np.dot(result[0], jacobian).tolist(), 0.0, False
-        damped = self._solve(gram_rows, rhs, damping_sq) if damping_sq > 0.0 else None
-        if damped is not None:
-            return np.dot(damped[0], jacobian).tolist(), math.sqrt(damping_sq), True
-        return self._least_squares(jacobian, rhs), math.sqrt(damping_sq), True
+        rates = np.linalg.lstsq(jacobian, np.asarray(rhs, dtype=float), rcond=1e-12)[0].tolist()
+        return rates, math.sqrt(damping_sq), True, manipulability
 
     # --- the control step -----------------------------------------------------------------
 
@@ -394,11 +388,7 @@ class CartesianController:
         if not math.isfinite(sum(rhs)):
             raise NonFiniteError("the goal pose or the goal twist")
 
-        result = self._fast_solve(values, rhs, 0.0)
-        if result is not None and self._certified(result, len(rhs)):
-            qdot, damping, singular, manipulability = result[0], 0.0, False, math.sqrt(result[1])
-        else:
-            qdot, damping, singular, manipulability = self._solve_near_singular(values, rhs, result)
+        qdot, damping, singular, manipulability = self._solve_general(values, rhs)
 
         limited: tuple[int, ...] = ()
         if self._respect_position_limits:
@@ -426,18 +416,17 @@ class CartesianController:
         velocity limit) at the rate that lands it on the limit, removes its column and
         re-solves the remaining task over the other joints.
         """
-        n = self._n
+        n, rows = self._n, self._rows
         lower, upper = self._lower, self._upper
         inverse_limits = self._inverse_velocity_limits
-        jacobian = self._task_jacobian(values)
-        residual = np.array(rhs, dtype=float)
-        free = np.ones(n, dtype=bool)
-        saturated: list[int] = []
+        reduced = list(values)  # the chain output with the held joints' columns zeroed
+        residual = list(rhs)
+        held: dict[int, float] = {}
         qdot = list(qdot)
         for _ in range(n):
             worst_joint, worst_excess, worst_rate = -1, 0.0, 0.0
             for j in range(n):
-                if not free[j]:
+                if j in held:
                     continue
                 rate = qdot[j]
                 # The rate that lands exactly on the limit; 0 for a joint already at or past it.
@@ -452,16 +441,19 @@ class CartesianController:
                     worst_joint, worst_excess, worst_rate = j, excess, bound
             if worst_joint < 0:
                 break
-            free[worst_joint] = False
-            saturated.append(worst_joint)
+            held[worst_joint] = worst_rate
             qdot[worst_joint] = worst_rate
-            residual -= jacobian[:, worst_joint] * worst_rate
-            if not free.any():
+            for i, r in enumerate(rows):
+                residual[i] -= values[16 + r * n + worst_joint] * worst_rate
+            for r in range(6):
+                reduced[16 + r * n + worst_joint] = 0.0
+            if len(held) == n:
                 break
-            solved, damping, singular = self._solve_reduced(jacobian[:, free], residual.tolist())
-            for value, j in zip(solved, np.flatnonzero(free)):
-                qdot[j] = value
-        return qdot, tuple(sorted(saturated)), damping, singular
+            solved, damping, singular, _ = self._solve_general(reduced, residual)
+            for j in range(n):
+                if j not in held:
+                    qdot[j] = solved[j]
+        return qdot, tuple(sorted(held)), damping, singular
 
     def error(self, q: np.ndarray, goal_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(orientation_error [rad], position_error [m])`` of the controlled frame at ``q``, shapes (3,)."""
