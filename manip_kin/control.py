@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.errors import InvalidArgumentError, JointCountError, NonFiniteError
+from manip_kin.fast_step import compile_step
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
-from manip_kin.fast_step import compile_step
 from manip_kin.rotations import matrix_to_rotvec
 from manip_kin.tasks import Task, parse_task
 from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound

@@ -40,7 +40,9 @@ from manip_kin.unrolled_linalg import (
 # Locals of the generated step: upper-case names and the solver's (a, b, d, l, p, r, x, y
 # with digits). The chain's own locals (q0.., c0.., s0.., v0.. today) must not be among
 # them: checked on generation.
-_STEP_NAMES = re.compile(r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|p\d+|r\d+|x\d+|y\d+|weight|shift|step|g|q|f|dt)$")
+_STEP_NAMES = re.compile(
+    r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|w\d+_\d+|p\d+|r\d+|x\d+|y\d+|inverse_trace|weight|shift|step|g|q|f|dt)$"
+)
 _ASSIGNMENT = re.compile(r"^\s*([A-Za-z_][\w\s,]*?)\s*=(?!=)")
 
 _ROTVEC = """\

@@ -4,8 +4,8 @@ A damped least-squares step ``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ b`` with J of sh
 costs a handful of numpy calls (copy J in, ``J Jᵀ``, ``linalg.solve``, ``Jᵀ x``) at about a
 microsecond of overhead each for a few hundred flops. Generated once as straight-line
 float arithmetic reading J directly from the tuple the unrolled kinematics
-(:func:`manip_kin.kinematics.compiled_kinematics`) return, with J's constant entries
-folded in, it costs less and yields for free what the damping rule needs: ``det(JJᵀ)``
+(:func:`manip_kin.kinematics.compiled_kinematics`) return (J's constant entries folded in,
+unless columns are to be zeroed by the caller), it costs less and yields for free what the damping rule needs: ``det(JJᵀ)``
 (the manipulability) and, with ``tr(JJᵀ)``, a lower bound of the smallest eigenvalue
 (:func:`smallest_eigenvalue_bound`) that spares the eigen-decomposition away from
 singularities.
@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-_CHOLESKY_CACHE: dict[int, Callable] = {}
 _DAMPED_CACHE: dict[tuple, tuple[Callable, Callable]] = {}
 
 
@@ -64,50 +63,14 @@ def smallest_eigenvalue_bound(determinant: float, trace: float, size: int) -> fl
 
     With eigenvalues λ₁ <= … <= λ_m: ``λ₁ = det / (λ₂ ⋯ λ_m)`` and, by the AM–GM inequality,
     ``λ₂ ⋯ λ_m <= (tr / (m - 1))^(m-1)``, so ``λ₁ >= det · ((m - 1) / tr)^(m-1)``. It is
-    tight when the other eigenvalues are similar and costs nothing after a Cholesky
-    factorisation; when it does not clear a threshold, compute the eigenvalues.
+    nearly tight when the other eigenvalues are similar and much larger than λ₁, loose when
+    they are spread, and costs nothing after a Cholesky factorisation.
     """
     if size == 1:
         return determinant
     if not trace > 0.0:
         return 0.0
     return determinant * ((size - 1) / trace) ** (size - 1)
-
-
-def _cholesky_source(m: int) -> str:
-    lines = ["def solve(a, b, d):"]
-    lines.append(f"    {', '.join(f'a{i}' for i in range(m))}, = a")
-    for i in range(m):
-        lines.append(f"    {', '.join(f'a{i}_{j}' for j in range(m))}, = a{i}")
-    lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
-    lines += _cholesky_body(m)
-    lines += _inverse_trace_lines(m)
-    lines.append(f"    return [{', '.join(f'x{i}' for i in range(m))}], {_determinant_and_trace(m)}, inverse_trace")
-    return "\n".join(lines) + "\n"
-
-
-def cholesky_solver(size: int) -> Callable:
-    """An unrolled Cholesky solve of ``(A + d·I) x = b`` for a symmetric ``size`` x ``size`` ``A``.
-
-    The returned ``solve(a, b, d)`` takes ``a`` as ``size`` rows of ``size`` floats (what
-    ``ndarray.tolist()`` gives), ``b`` as ``size`` floats and the diagonal shift ``d``
-    (λ², >= 0). It returns ``(x, determinant, trace, inverse_trace)``: the solution as a list
-    of ``size`` floats, ``det(A + dI)`` and ``tr(A + dI)`` (together a cheap lower bound of
-    the smallest eigenvalue, :func:`smallest_eigenvalue_bound`) and ``tr((A + dI)⁻¹)``
-    (``1 / inverse_trace`` is another lower bound, within a factor ``size`` of it).
-
-    It returns None when a pivot is not positive: ``A + dI`` is singular (or indefinite, or
-    holds NaN) to working precision.
-    """
-    if not 1 <= size <= 12:
-        raise ValueError(f"cholesky_solver size {size}; valid: 1..12")
-    solver = _CHOLESKY_CACHE.get(size)
-    if solver is None:
-        namespace: dict = {"sqrt": math.sqrt}
-        exec(compile(_cholesky_source(size), f"<manip_kin cholesky {size}>", "exec"), namespace)  # noqa: S102
-        solver = namespace["solve"]
-        _CHOLESKY_CACHE[size] = solver
-    return solver
 
 
 def chain_constants(chain: Callable, dof: int, samples: int = 3, seed: int = 0) -> dict[int, float]:
@@ -210,17 +173,10 @@ def damped_solve_lines(
     return lines, qdot
 
 
-def _damped_solve_source(
-    dof: int, rows: Sequence[int], constants: dict[int, float], offset: int, excluded: Sequence[int], inverse_trace: bool
-) -> str:
+def _damped_solve_source(dof: int, rows: Sequence[int], constants: dict[int, float], offset: int, inverse_trace: bool) -> str:
     n, m = dof, len(rows)
-    # Excluded columns are constant zeros: J without them, and zero rates for them.
-    constants = dict(constants)
-    for i, r in enumerate(rows):
-        for j in excluded:
-            constants[offset + r * n + j] = 0.0
     entries = jacobian_entries(dof, rows, None, constants, offset)
-    unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n) if j not in excluded}
+    unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n)}
     lines = ["def solve(values, b, d):"]
     lines.append("    " + ", ".join(unpacked.get(k, "_") for k in range(offset + 6 * n)) + ", = values")
     lines.append(f"    {', '.join(f'b{i}' for i in range(m))}, = b")
@@ -239,7 +195,6 @@ def damped_solver(
     dof: int,
     rows: Sequence[int],
     offset: int = 16,
-    excluded: Sequence[int] = (),
     inverse_trace: bool = False,
     fold_constants: bool = True,
 ) -> Callable:
@@ -255,8 +210,6 @@ def damped_solver(
         dof: number of joints n.
         rows: task rows, indices into ``[ωx, ωy, ωz, vx, vy, vz]``.
         offset: index of the Jacobian's first entry in the chain's output.
-        excluded: joints whose columns are left out (joints held at a limit): the system is
-            solved over the others and their rates are 0.
         inverse_trace: also return ``tr((J Jᵀ + dI)⁻¹)``, whose inverse is a lower bound of
             the smallest eigenvalue within a factor m (tighter than
             :func:`smallest_eigenvalue_bound` when the eigenvalues are spread).
@@ -267,17 +220,17 @@ def damped_solver(
     Returns:
         ``solve(values, b, d)`` -> ``(qdot, determinant, trace)`` (plus ``inverse_trace``) or
         None, where ``values`` is the chain's output, ``b`` the ``len(rows)`` task-space
-        values, ``d`` = λ² >= 0; ``determinant`` and ``trace`` are those of ``J Jᵀ + dI`` as in
-        :func:`cholesky_solver`, which also explains the None.
+        values, ``d`` = λ² >= 0; ``determinant`` and ``trace`` are those of ``J Jᵀ + dI``;
+        None when a Cholesky pivot is not positive (``J Jᵀ + dI`` singular to working
+        precision, or NaN in the input).
     """
     rows = tuple(int(r) for r in rows)
-    excluded = tuple(sorted(int(j) for j in excluded))
-    key = (id(chain), dof, rows, offset, excluded, inverse_trace, fold_constants)
+    key = (id(chain), dof, rows, offset, inverse_trace, fold_constants)
     cached = _DAMPED_CACHE.get(key)
     if cached is not None and cached[0] is chain:
         return cached[1]
     constants = _constants_of(chain, dof) if fold_constants else {}
-    source = _damped_solve_source(dof, rows, constants, offset, excluded, inverse_trace)
+    source = _damped_solve_source(dof, rows, constants, offset, inverse_trace)
     namespace: dict = {"sqrt": math.sqrt}
     exec(compile(source, "<manip_kin damped solve>", "exec"), namespace)  # noqa: S102 - our own source
     solver = namespace["solve"]

@@ -371,3 +371,53 @@ def test_bad_inputs_raise_clear_errors():
         ControllerConfig(singular_threshold=0.0)
     with pytest.raises(ManipKinError, match="task"):
         CartesianController(model, ControllerConfig(task="elbow"))
+
+
+# --- the unrolled solver the hot path runs on -----------------------------------------------
+
+
+def test_unrolled_damped_solve_matches_numpy():
+    from manip_kin.kinematics import compiled_kinematics
+    from manip_kin.unrolled_linalg import damped_solver
+
+    rng = np.random.default_rng(12)
+    model = load_robot("genova7")
+    chain = compiled_kinematics(model, model.dof + 2, True)
+    for rows in ((0, 1, 2, 3, 4, 5), (3, 4, 5), (2, 3, 4, 5)):
+        folded = damped_solver(chain, 7, rows, inverse_trace=True)
+        unfolded = damped_solver(chain, 7, rows, inverse_trace=True, fold_constants=False)
+        for _ in range(10):
+            q = model.random_configuration(rng)
+            values = chain(q.tolist())
+            jacobian = numeric_jacobian(model, q)[list(rows)]
+            b = rng.normal(size=len(rows))
+            shift = rng.choice([0.0, 1e-3])
+            gram = jacobian @ jacobian.T + shift * np.eye(len(rows))
+            qdot, determinant, trace, inverse_trace = folded(values, b.tolist(), shift)
+            np.testing.assert_allclose(qdot, jacobian.T @ np.linalg.solve(gram, b), rtol=1e-5, atol=1e-8)
+            assert determinant == pytest.approx(np.linalg.det(gram), rel=1e-5)
+            assert trace == pytest.approx(np.trace(gram), rel=1e-8)
+            assert inverse_trace == pytest.approx(np.trace(np.linalg.inv(gram)), rel=1e-5)
+            np.testing.assert_allclose(unfolded(values, b.tolist(), shift)[0], qdot, rtol=1e-12, atol=1e-15)
+    # A zero Jacobian (every column zeroed) without damping is singular: None, not a crash.
+    zeroed = list(chain(model.initial_positions.tolist()))
+    zeroed[16:] = [0.0] * 42
+    assert damped_solver(chain, 7, range(6), fold_constants=False)(zeroed, [1.0] * 6, 0.0) is None
+
+
+def test_smallest_eigenvalue_bound_is_a_lower_bound():
+    from manip_kin.unrolled_linalg import smallest_eigenvalue_bound
+
+    rng = np.random.default_rng(13)
+    for size in (1, 3, 6):
+        for _ in range(200):
+            factor = rng.normal(size=(size, size + 1)) * rng.uniform(0.01, 3.0, size=(size, 1))
+            matrix = factor @ factor.T
+            eigenvalues = np.linalg.eigvalsh(matrix)
+            bound = smallest_eigenvalue_bound(np.prod(eigenvalues), np.sum(eigenvalues), size)
+            assert bound <= eigenvalues[0] * (1 + 1e-9)
+        # Nearly tight when the other eigenvalues are equal and much larger.
+        if size > 1:
+            eigenvalues = np.array([1e-4] + [2.0] * (size - 1))
+            bound = smallest_eigenvalue_bound(np.prod(eigenvalues), np.sum(eigenvalues), size)
+            assert bound == pytest.approx(1e-4, rel=1e-3)
