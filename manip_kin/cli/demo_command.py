@@ -1,0 +1,153 @@
+"""``manip_kin demo``: the main job, end to end, on the genova7 "pose goal" scenario.
+
+1. core: the tool pose and Jacobian at the start configuration;
+2. control law, offline: the resolved-rate simulation of the pose goal;
+3. live pipeline: robot_state, cartesian_controller, trajectory_generator and the recorder as
+   separate processes on loopback DDS; the pose goal, then a straight line back to a second
+   target (the start tool pose);
+4. the recording: ``manip_kin info`` of it and its plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from manip_kin.cli.common import format_matrix
+from manip_kin.kinematics import frame_pose, jacobian
+from manip_kin.robots import load_robot
+from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
+
+# The genova7 "pose goal" scenario of shared/robots.md.
+GOAL_POSITION = (0.2, -0.7, 0.3)
+GOAL_RPY = (0.0, 1.57, 0.0)
+GAIN = 0.8  # [1/s], angular and linear
+TOLERANCE = 1e-6  # [m] and [rad]
+
+
+def register(subparsers) -> None:
+    """Add the ``demo`` sub-command."""
+    parser = subparsers.add_parser(
+        "demo",
+        help="run the genova7 pose-goal scenario: core, offline control law, live ROS pipeline, recording",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--out", default="runs/demo.mcap", metavar="FILE", help="recording of the live run (default runs/demo.mcap)")
+    parser.add_argument("--rate", type=float, default=500.0, metavar="HZ", help="loop rate of the nodes [Hz] (default 500)")
+    parser.add_argument("--line-speed", type=float, default=0.2, metavar="M/S", help="top speed of the straight line [m/s] (default 0.2)")
+    parser.add_argument("--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)")
+    parser.add_argument("--timeout", type=float, default=60.0, metavar="S", help="limit for each live leg [s]")
+    parser.set_defaults(run=run_demo)
+
+
+def _heading(text: str) -> None:
+    print(f"\n=== {text}", flush=True)
+
+
+def _pose_line(pose: np.ndarray) -> str:
+    xyz = ", ".join(f"{v:+.4f}" for v in pose[:3, 3])
+    rpy = ", ".join(f"{v:+.4f}" for v in matrix_to_rpy(pose[:3, :3]))
+    return f"xyz [{xyz}] m, rpy [{rpy}] rad"
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    model = load_robot("genova7")
+    q0 = model.start_configuration()
+    goal_pose = make_transform(rpy_to_matrix(*GOAL_RPY), GOAL_POSITION)
+
+    _heading("1/4 core: genova7 at the scenario start q0")
+    print(f"q0 = {np.round(q0, 4).tolist()} [rad | m]")
+    start_pose = frame_pose(model, q0, "tool")
+    print("tool pose in base_link:")
+    print(format_matrix(start_pose))
+    tool_jacobian = jacobian(model, q0, "tool")
+    print("geometric Jacobian of the tool, angular rows [rad/s per unit q̇]:")
+    print(format_matrix(tool_jacobian.angular))
+    print("linear rows [m/s per unit q̇]:")
+    print(format_matrix(tool_jacobian.linear))
+
+    _heading("2/4 control law, offline: resolved-rate simulation of the pose goal")
+    from manip_kin.control import ControllerConfig
+    from manip_kin.simulation import simulate
+
+    print(f"goal: {_pose_line(goal_pose)}; gains {GAIN} 1/s; dt 1 ms")
+    started = time.perf_counter()
+    result = simulate(model, q0, goal_pose, ControllerConfig(gain_angular=GAIN, gain_linear=GAIN), dt=0.001, duration=20.0, tolerance=TOLERANCE)
+    elapsed = time.perf_counter() - started
+    prismatic = int(np.flatnonzero(model.is_prismatic)[0])
+    lowest = float(result.q[:, prismatic].min())
+    ideal = math.log(max(np.linalg.norm(result.position_error[0]), np.linalg.norm(result.orientation_error[0])) / TOLERANCE) / GAIN
+    print(
+        f"converged: {result.converged} at t = {result.time_to_converge} s "
+        f"(pure exponential convergence: {ideal:.2f} s); {result.steps} steps in {elapsed:.2f} s of computing"
+    )
+    print(f"final error: position {result.final_position_error:.2e} m, orientation {result.final_orientation_error:.2e} rad")
+    print(
+        f"prismatic {model.joints[prismatic].name}: lowest {lowest:.6f} m (limit {model.lower[prismatic]:.3f} m); "
+        f"largest limit violation {result.max_limit_violation:.1e}"
+    )
+    if args.offline_only:
+        return 0 if result.converged else 1
+    return _run_live(args, model, q0, goal_pose, start_pose)
+
+
+def _run_live(args, model, q0, goal_pose, start_pose) -> int:
+    from manip_kin.pipeline import NodeProcess, Pipeline, ensure_ros_isolation, pipeline_processes
+
+    env = ensure_ros_isolation()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.exists():
+        out.unlink()
+    _heading(f"3/4 live pipeline at {args.rate:g} Hz (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})")
+    controller = {"position_tolerance": TOLERANCE, "orientation_tolerance": TOLERANCE, "gain_linear": GAIN, "gain_angular": GAIN}
+    generator = {"time_scaling": "trapezoidal", "max_linear_velocity": args.line_speed}
+    recorder = NodeProcess("recorder", "recorder", {"output": str(out)})
+    processes = [recorder] + pipeline_processes("genova7", rate_hz=args.rate, controller=controller, generator=generator)
+    exit_code = 0
+    with Pipeline(processes) as pipeline:
+        print(f"started {', '.join(pipeline.processes)} (logs in {pipeline.log_dir})", flush=True)
+        client = pipeline.client()
+        legs = (("leg 1: pose goal", client.send_goal, goal_pose), ("leg 2: straight line back to the start tool pose", client.send_line, start_pose))
+        for title, send, target in legs:
+            print(f"{title}: {_pose_line(target)}", flush=True)
+            started = time.perf_counter()
+            stamp = send(target)
+            if send == client.send_line:
+                status = client.wait_line_done(stamp, timeout=args.timeout)
+                if status.message != "holding":
+                    print(f"  line rejected: {status.values.get('last_rejection')}")
+                    exit_code = 1
+                    continue
+                stamp = status.values.get("final_goal_stamp", stamp)
+            converged, status = client.wait_converged(stamp, timeout=args.timeout)
+            took = time.perf_counter() - started
+            errors = (
+                f"position {status.number('position_error'):.2e} m, orientation {status.number('orientation_error'):.2e} rad"
+                if status is not None
+                else "no status"
+            )
+            print(f"  {'converged' if converged else 'NOT converged'} in {took:.2f} s; final error {errors}", flush=True)
+            exit_code = exit_code or (0 if converged else 1)
+        tool_now = client.current_tool_pose()
+        print(f"  tool now: {_pose_line(tool_now)}")
+        summary_code = pipeline.stop_process("recorder", timeout=10.0)
+        recorder_lines = [line for line in pipeline.log_text("recorder").splitlines() if line.strip()]
+        if recorder_lines:
+            print(f"recorder: {recorder_lines[-1]}")
+        if summary_code not in (0, None):
+            print(f"recorder exited with {summary_code}", file=sys.stderr)
+    _heading(f"4/4 the recording: {out}")
+    from manip_kin.plotting import load_run, plot_run
+    from manip_kin.recording import read_info
+
+    print(read_info(out).to_text())
+    figures = plot_run(load_run(out), out.parent / f"{out.stem}_plots", title="genova7 demo")
+    print(f"plots: {', '.join(str(p) for p in figures)}")
+    return exit_code
