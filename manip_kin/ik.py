@@ -49,8 +49,9 @@ from manip_kin.tasks import Task, parse_task
 from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
 
 IK_METHODS = ("lm", "nr", "dls")
-# Default damping per method: λ̄ [m² | rad²] added to w·|e|² for lm; λ for dls; the
-# smallest singular value below which nr damps.
+# Default damping per method: λ̄ [m² | rad²] added to w·|e|² for lm (kept tiny: near a
+# singular target, e.g. an irb120 wrist at q5 ≈ 0, a λ̄ of 1e-6 already slows the last
+# iterations enough to stall); λ for dls; the smallest singular value below which nr damps.
 DEFAULT_DAMPING = {"lm": 1e-9, "nr": 1e-3, "dls": 0.01}
 # Weight w of |e|² in the lm damping. Sugihara's E = ½|e|² (w = 0.5) takes ~20% more
 # iterations from random starts on the 7-DoF arms than this, measured on genova7 and Panda.
@@ -266,7 +267,7 @@ def solve_ik(
         tolerance_orientation: success threshold on the orientation error [rad].
         max_iterations: iteration cap of one attempt.
         step: step size α in (0, 1]: ``q ← q + α Δq``.
-        damping: ``lm``: λ̄ [m² | rad²] (default 1e-6); ``dls``: λ (default 0.01); ``nr``: the
+        damping: ``lm``: λ̄ [m² | rad²] (default 1e-9); ``dls``: λ (default 0.01); ``nr``: the
             smallest singular value below which the step is damped (default 1e-3).
         restarts: how many random restarts may follow a failed first attempt.
         time_budget: wall-time limit over all attempts [s]; the first attempt always runs.
