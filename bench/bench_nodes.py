@@ -154,7 +154,7 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         "irb120",
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
-        controller={"gain_linear": 3.0, "gain_angular": 3.0},
+        controller={"gain_linear": 6.0, "gain_angular": 6.0},
         generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
         realtime_priority=priority,
     )
@@ -177,7 +177,7 @@ def _line_row(rate_hz: float, priority: int) -> dict:
             "reached_start": converged,
             "converged_end": final,
             "target": TARGETS["line"],
-            "reference": "gains 3/3 1/s, feed-forward twist",
+            "reference": "gains 6/6 1/s, feed-forward twist",
         }
 
 

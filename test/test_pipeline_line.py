@@ -31,7 +31,7 @@ def irb120(tmp_path_factory):
     processes = pipeline_processes(
         "irb120",
         initial_positions=[0.0] * 6,
-        controller={"gain_linear": 3.0, "gain_angular": 3.0},
+        controller={"gain_linear": 6.0, "gain_angular": 6.0},
         generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
         # Tracking accuracy depends on the loops running on time; other jobs share these cores.
         realtime_priority=10,

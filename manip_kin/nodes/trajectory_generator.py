@@ -127,6 +127,7 @@ class TrajectoryGeneratorNode(Node):
         self.last_rejection = ""
         self._last_diagnostics_ns = 0
         self._warn = ThrottledLog(self.get_logger().warning, 0.5)
+        self._error = ThrottledLog(self.get_logger().error, 0.5)
 
         self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
         self.get_logger().info(
@@ -156,7 +157,7 @@ class TrajectoryGeneratorNode(Node):
         # A rejected target does not replace the running line's target_stamp.
         self.rejected_stamp = conv.stamp_key(msg.header.stamp)
         kept = "the running line goes on" if self.state == "streaming" else "nothing to do"
-        self.get_logger().error(f"rejected /line_target: {reason}; {kept}")
+        self._error("target:" + conv.problem_kind(reason), f"rejected /line_target: {reason}; {kept}")
         if self.state != "streaming":
             self.state, self.detail = "rejected", reason
 
