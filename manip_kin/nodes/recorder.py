@@ -28,6 +28,7 @@ import threading
 import time
 from dataclasses import dataclass
 from datetime import datetime
+from pathlib import Path
 from typing import Any
 
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
@@ -162,6 +163,8 @@ class RecorderNode(Node):
         if not self._all_topics and not topics:
             raise RecordingError("parameter topics is empty and all_topics is false: nothing to record")
         self._wanted = {self.resolve_topic_name(t) for t in topics}
+        if output.endswith(".mcap") and Path(output).is_file():
+            self.get_logger().warning(f"overwriting the existing recording {output}")
         self._writer = RecordingWriter(output, compression=compression)
         # The writer is shared by the intake thread and the executor thread (discovery, flush).
         self._lock = threading.Lock()

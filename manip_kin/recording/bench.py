@@ -92,3 +92,163 @@ def benchmark_writer(n_messages: int = 20_000, joints: int = 7, compression: str
         "object_write_us_per_message": object_seconds / n_messages * 1e6,
         "file_bytes_per_message": raw_summary.file_bytes / n_messages,
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# Live recorder throughput: a publisher process and the recorder node as subprocesses.
+
+# The demo's topic set, in the order the load publisher uses them.
+LOAD_TOPICS = (
+    ("/joint_states", "sensor_msgs/msg/JointState"),
+    ("/joint_velocity_commands", "std_msgs/msg/Float64MultiArray"),
+    ("/tool_pose", "geometry_msgs/msg/PoseStamped"),
+    ("/ee_pose", "geometry_msgs/msg/PoseStamped"),
+    ("/tool_twist", "geometry_msgs/msg/TwistStamped"),
+    ("/ee_twist", "geometry_msgs/msg/TwistStamped"),
+    ("/goal_pose", "geometry_msgs/msg/PoseStamped"),
+    ("/goal_twist", "geometry_msgs/msg/TwistStamped"),
+)
+
+
+def _cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds of a process (Linux ``/proc``), None elsewhere."""
+    import os
+
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def publish_load(rate_hz: float, duration_s: float, n_topics: int, depth: int = 100, wait_s: float = 20.0) -> int:
+    """Publish one message per topic every ``1/rate_hz`` s for ``duration_s`` (the bench's load).
+
+    Waits (up to ``wait_s``) until every topic has a subscriber first. Returns the
+    number of messages published. Run in its own process (``python -m
+    manip_kin.recording.bench publish RATE DURATION TOPICS``) so that its CPU is
+    not the recorder's.
+    """
+    import rclpy
+
+    from manip_kin.recording.reader import message_class
+
+    rclpy.init(args=[])
+    node = rclpy.create_node("recorder_bench_load")
+    try:
+        publishers = []
+        for topic, type_name in LOAD_TOPICS[:n_topics]:
+            message = message_class(type_name)()
+            if type_name.endswith("JointState"):
+                message.name = [f"joint_{j + 1}" for j in range(7)]
+                message.position, message.velocity = [0.1] * 7, [0.2] * 7
+            elif type_name.endswith("Float64MultiArray"):
+                message.data = [0.1] * 7
+            publishers.append((node.create_publisher(type(message), topic, depth), message))
+        deadline = time.monotonic() + wait_s
+        while any(p.get_subscription_count() == 0 for p, _ in publishers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.3)
+        count, period = 0, 1.0 / rate_hz
+        start = time.perf_counter()
+        tick = start
+        while time.perf_counter() - start < duration_s:
+            now_ns = time.time_ns()
+            for publisher, message in publishers:
+                if hasattr(message, "header"):
+                    message.header.stamp.sec, message.header.stamp.nanosec = divmod(now_ns, NS_PER_S)
+                publisher.publish(message)
+                count += 1
+            tick += period
+            time.sleep(max(0.0, tick - time.perf_counter()))
+        time.sleep(0.5)  # let the last samples be delivered before the participant goes
+        return count
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def benchmark_recorder(rate_hz: float = 1000.0, duration_s: float = 8.0, n_topics: int = 8, depth: int = 100) -> dict:
+    """Record a synthetic load with the ``recorder`` node; measure loss and the recorder's CPU.
+
+    Starts the recorder and a load publisher (:func:`publish_load`) as
+    subprocesses on the current ``ROS_DOMAIN_ID`` (set it to a free one), reads
+    the recorder's CPU time from ``/proc`` over the publishing window, stops it
+    with SIGINT and counts what the file holds.
+
+    Args:
+        rate_hz: messages per second per topic.
+        duration_s: publishing time [s] (the CPU window skips its first second).
+        n_topics: how many of :data:`LOAD_TOPICS` (8 = the 1 kHz pipeline's topic set).
+        depth: publisher queue depth (reliable keep-last publishers overwrite unacknowledged
+            samples when it is too small, which shows as loss).
+
+    Returns:
+        ``{"rate_hz", "topics", "published", "recorded", "lost", "target_messages_per_s",
+        "published_messages_per_s", "recorder_cpu_percent", "recorder_summary"}``; CPU in
+        percent of one core (None where ``/proc`` is missing).
+    """
+    import signal
+    import subprocess
+    import sys
+
+    from manip_kin.recording.reader import read_info
+
+    with tempfile.TemporaryDirectory(prefix="manip_kin_recbench_") as directory:
+        output = Path(directory) / "load.mcap"
+        topics = ",".join(topic for topic, _ in LOAD_TOPICS[:n_topics])
+        recorder = subprocess.Popen(
+            [sys.executable, "-m", "manip_kin.nodes.recorder", "--ros-args",
+             "-p", f"output:={output}", "-p", f"topics:=[{topics}]"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )
+        load = subprocess.Popen(
+            [sys.executable, "-m", "manip_kin.recording.bench", "publish",
+             str(rate_hz), str(duration_s), str(n_topics), str(depth)],
+            stdout=subprocess.PIPE, text=True,
+        )
+        try:
+            # Discovery and matching first; then measure a window inside the publishing time.
+            time.sleep(min(3.0, duration_s / 2))
+            cpu_start, wall_start = _cpu_seconds(recorder.pid), time.monotonic()
+            window = max(0.5, duration_s - 2.0)
+            time.sleep(window)
+            cpu_end, wall_end = _cpu_seconds(recorder.pid), time.monotonic()
+            published = int((load.communicate(timeout=duration_s + 60)[0] or "0").strip().splitlines()[-1])
+            recorder.send_signal(signal.SIGINT)
+            _, stderr = recorder.communicate(timeout=60)
+        finally:
+            for process in (load, recorder):
+                if process.poll() is None:
+                    process.kill()
+                    process.communicate()
+        recorded = read_info(output).message_count
+    cpu = None
+    if cpu_start is not None and cpu_end is not None:
+        cpu = 100.0 * (cpu_end - cpu_start) / (wall_end - wall_start)
+    summary = next((line for line in stderr.splitlines() if line.startswith("recorder: ")), "")
+    return {
+        "rate_hz": rate_hz,
+        "topics": n_topics,
+        "published": published,
+        "recorded": recorded,
+        "lost": published - recorded,
+        "target_messages_per_s": rate_hz * n_topics,
+        # The load publisher is Python too: at high rates it falls behind its target.
+        "published_messages_per_s": published / duration_s,
+        "recorder_cpu_percent": cpu,
+        "recorder_summary": summary,
+    }
+
+
+if __name__ == "__main__":
+    import sys
+
+    if len(sys.argv) >= 5 and sys.argv[1] == "publish":
+        extra = [int(sys.argv[5])] if len(sys.argv) > 5 else []
+        print(publish_load(float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4]), *extra), flush=True)
+    else:
+        import json
+
+        print(json.dumps({"writer": benchmark_writer(), "recorder": benchmark_recorder()}, indent=2))

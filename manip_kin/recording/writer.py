@@ -14,7 +14,7 @@ file complete (and the ``rosbag2`` metadata record and ``metadata.yaml``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
