@@ -352,10 +352,6 @@ class CartesianController:
                 the position limits.
         """
         q_values = q.tolist() if type(q) is np.ndarray else [float(v) for v in q]
-        if len(q_values) != self._n:
-            raise JointCountError("q", len(q_values), self._n)
-        if not 0.0 < dt < _INFINITY:
-            raise InvalidArgumentError(f"dt = {dt!r}; valid: a finite period > 0 [s]")
         if type(goal_pose) is np.ndarray and goal_pose.shape == (4, 4):
             goal = goal_pose.tolist()
         else:
@@ -363,16 +359,23 @@ class CartesianController:
         feed_forward = _NO_FEED_FORWARD if goal_twist is None else _feed_forward_values(goal_twist)
         fused_step = self._fused_step
         if fused_step is not None:
+            # The generated step returns None, or raises, whenever anything is unusual (a
+            # wrong q length, a non-finite value, dt <= 0, a singularity, a limit); the
+            # general path then validates the input and handles every case.
             try:
                 output = fused_step(q_values, goal, feed_forward, dt)
             except (ArithmeticError, ValueError):
-                output = None  # e.g. an infinite q or a goal "rotation" that is not one
+                output = None
             if output is not None:
                 return output
         return self._step_general(q_values, goal, feed_forward, dt)
 
     def _step_general(self, q_values: list, goal: list, feed_forward: Sequence[float], dt: float) -> ControlOutput:
         """Every case of the control law: damping near singularities, position limits, scaling."""
+        if len(q_values) != self._n:
+            raise JointCountError("q", len(q_values), self._n)
+        if not 0.0 < dt < _INFINITY:
+            raise InvalidArgumentError(f"dt = {dt!r}; valid: a finite period > 0 [s]")
         if not math.isfinite(sum(q_values)):
             raise NonFiniteError("q")
         values = self._chain(q_values)

@@ -150,6 +150,8 @@ def step_source(
     """
     n, m = dof, len(rows)
     lines, tokens, constants = _chain_and_error_lines("def step(q, g, f, dt):", chain, dof)
+    lines.insert(1, "    if not 0.0 < dt < INFINITY:")
+    lines.insert(2, "        return None")
     lines.append("    F0, F1, F2, F3, F4, F5 = f")
     for i, r in enumerate(rows):
         gain = gain_angular if r < 3 else gain_linear
@@ -240,6 +242,7 @@ def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: t
         "array": np.array,
         "NEW": object.__new__,
         "OUTPUT": output_class,
+        "INFINITY": math.inf,
     }
     exec(compile(source, "<manip_kin control step>", "exec"), namespace)  # noqa: S102 - our own source
     function = namespace["step"]
