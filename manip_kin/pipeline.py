@@ -552,7 +552,14 @@ class PipelineClient:
         from rclpy.duration import Duration
 
         publisher = self.publisher(type(msg), topic)
-        matched = self.spin_until(lambda: publisher.get_subscription_count() >= subscribers, timeout)
+
+        def all_matched() -> bool:
+            # Every subscription the graph knows must be matched, not just the first one:
+            # with a recorder running, it may match before the controller does.
+            known = len(self.node.get_subscriptions_info_by_topic(topic))
+            return publisher.get_subscription_count() >= max(subscribers, known)
+
+        matched = self.spin_until(all_matched, timeout)
         if not matched:
             raise PipelineError(f"no subscriber on {topic} after {timeout:g} s (is the node running, same ROS_DOMAIN_ID?)")
         # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
