@@ -43,6 +43,8 @@ def recorded_run(tmp_path_factory):
         stamp = client.send_goal(GOAL)
         converged, status = client.wait_converged(stamp, timeout=40)
         assert converged, status
+        # A one-shot message from a publisher created just now is recorded too.
+        client.send_line(GOAL)
         client.spin_for(0.3)
         assert pipeline.stop_process("recorder", timeout=15) == 0
         summary = pipeline.log_text("recorder").strip().splitlines()[-1]
@@ -110,9 +112,9 @@ def test_rclpy_reader_counts_match_info(recorded_run):
     for topic, message, log_time_ns, publish_time_ns in read_messages(path):
         counts[topic] = counts.get(topic, 0) + 1
         assert log_time_ns > 0 and publish_time_ns > 0
-    for topic in ("/joint_states", "/tool_pose", "/joint_velocity_commands", "/robot_description", "/goal_pose"):
+    for topic in ("/joint_states", "/tool_pose", "/joint_velocity_commands", "/robot_description", "/goal_pose", "/line_target"):
         assert counts.get(topic, 0) == info.topic(topic).message_count > 0, topic
-    assert counts["/robot_description"] == 1 and counts["/goal_pose"] == 1
+    assert counts["/robot_description"] == 1 and counts["/line_target"] == 1
 
 
 def test_the_recorded_errors_decay_to_the_goal(recorded_run):

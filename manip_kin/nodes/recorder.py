@@ -37,25 +37,29 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from manip_kin.nodes.runner import run_node
 from manip_kin.recording.errors import RecordingError
-from manip_kin.recording.qos import OfferedProfiles
+from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.reader import message_class
 from manip_kin.recording.writer import COMPRESSION_CHOICES, RecordingWriter
 
-# Every manip_kin topic (shared/interfaces.md).
-DEFAULT_TOPICS = (
-    "/joint_states",
-    "/joint_velocity_commands",
-    "/goal_pose",
-    "/goal_twist",
-    "/line_target",
-    "/planned_path",
-    "/ee_pose",
-    "/tool_pose",
-    "/ee_twist",
-    "/tool_twist",
-    "/robot_description",
-    "/diagnostics",
-)
+# Every manip_kin topic and its type (shared/interfaces.md). These are subscribed at start,
+# before any publisher is seen, so a one-shot message (a goal sent by `manip_kin goal`
+# right after its publisher appears) is not missed while discovery catches up.
+MANIP_KIN_TOPIC_TYPES = {
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/joint_velocity_commands": "std_msgs/msg/Float64MultiArray",
+    "/goal_pose": "geometry_msgs/msg/PoseStamped",
+    "/goal_twist": "geometry_msgs/msg/TwistStamped",
+    "/line_target": "geometry_msgs/msg/PoseStamped",
+    "/planned_path": "nav_msgs/msg/Path",
+    "/ee_pose": "geometry_msgs/msg/PoseStamped",
+    "/tool_pose": "geometry_msgs/msg/PoseStamped",
+    "/ee_twist": "geometry_msgs/msg/TwistStamped",
+    "/tool_twist": "geometry_msgs/msg/TwistStamped",
+    "/robot_description": "std_msgs/msg/String",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
+DEFAULT_TOPICS = tuple(MANIP_KIN_TOPIC_TYPES)
+LATCHED_TOPICS = frozenset({"/robot_description"})
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_CHECK_PERIOD_S = 0.25
 INTAKE_PERIOD_S = 0.005
@@ -108,6 +112,7 @@ class _RawTopic:
     """A raw subscription handle the executor never sees (the intake thread drains it)."""
 
     name: str
+    type_name: str
     message_type: type
     handle: Any
     lost_event: Any  # message-lost event handle, or None when the middleware has none
@@ -116,6 +121,7 @@ class _RawTopic:
     middleware_lost: int = 0
     single_publisher: bool = True
     received: int = 0
+    presubscribed: bool = False  # subscribed before any publisher was seen
 
 
 class RecorderNode(Node):
@@ -173,6 +179,9 @@ class RecorderNode(Node):
         self._stopping = threading.Event()
         self._finished_line: str | None = None
         self._stop_reason = ""
+        if not self._all_topics:
+            for topic in sorted(self._wanted & set(MANIP_KIN_TOPIC_TYPES)):
+                self._subscribe(topic, [], [MANIP_KIN_TOPIC_TYPES[topic]])
         self._discover()
         self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self.create_timer(FLUSH_CHECK_PERIOD_S, self._flush_if_due)
@@ -199,19 +208,26 @@ class RecorderNode(Node):
                 continue
             publishers = self.get_publishers_info_by_topic(topic)
             if topic in self._topics:
+                entry = self._topics[topic]
                 # Sequence gaps only mean drops while one publisher numbers the messages.
-                self._topics[topic].single_publisher &= len(publishers) <= 1
+                entry.single_publisher &= len(publishers) <= 1
+                if entry.presubscribed and any(
+                    p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers
+                ):
+                    # Our reliable pre-subscription cannot match a best-effort publisher.
+                    self._resubscribe(entry, publishers, types)
                 continue
             if not publishers:
                 continue  # only subscribers so far: the publishers' QoS decides ours
             self._subscribe(topic, publishers, types)
 
     def _subscribe(self, topic: str, publishers: list, types: list[str]) -> None:
+        """Subscribe to ``topic``; with no ``publishers`` yet, as manip_kin's nodes publish it."""
         from rclpy.event_handler import QoSSubscriptionEventType
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
         from rclpy.type_support import check_is_valid_msg_type
 
-        type_name = publishers[0].topic_type
+        type_name = publishers[0].topic_type if publishers else types[0]
         if len({p.topic_type for p in publishers}) > 1 or len(types) > 1:
             self.get_logger().warning(
                 f"{topic} is published with several types ({', '.join(sorted(set(types)))}); recording {type_name}"
@@ -222,18 +238,21 @@ class RecorderNode(Node):
             self._skipped.add(topic)
             self.get_logger().warning(f"not recording {topic}: {error}")
             return
-        offered = OfferedProfiles.from_rclpy(p.qos_profile for p in publishers)
-        type_hash = str(publishers[0].topic_type_hash)
-        with self._lock:
-            self._writer.add_topic(
-                topic,
-                type_name,
-                offered_qos_profiles=offered,
-                # An unset hash (a publisher from before Iron) is not RIHS01: use the local one.
-                type_description_hash=type_hash if type_hash.startswith("RIHS01_") else None,
+        if publishers:
+            qos = requested_qos([p.qos_profile for p in publishers])
+            with self._lock:
+                self._add_channel(topic, type_name, publishers)
+        else:
+            # As manip_kin's own publishers offer it: reliable, transient local for the
+            # description. The channel is added with the first message, when the publisher is known.
+            latched = topic in LATCHED_TOPICS
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=1 if latched else SUBSCRIPTION_DEPTH,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
             )
         check_is_valid_msg_type(message_type)
-        qos = requested_qos([p.qos_profile for p in publishers])
         with self.handle:
             handle = _rclpy.Subscription(self.handle, message_type, topic, qos.get_c_qos_profile())
         try:
@@ -241,10 +260,41 @@ class RecorderNode(Node):
             lost_event = _rclpy.EventHandle(handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
         except _rclpy.UnsupportedEventTypeError:
             lost_event = None
-        entry = _RawTopic(topic, message_type, handle, lost_event, single_publisher=len(publishers) == 1)
+        entry = _RawTopic(
+            topic, type_name, message_type, handle, lost_event,
+            single_publisher=len(publishers) <= 1, presubscribed=not publishers,
+        )
         with self._lock:
             self._topics[topic] = entry
         self.get_logger().info(f"recording {topic} ({type_name}, {len(publishers)} publisher(s))")
+
+    def _add_channel(self, topic: str, type_name: str, publishers: list) -> None:
+        """Register ``topic`` with the writer, with its publishers' QoS and type hash (lock held)."""
+        if self._writer.has_topic(topic):
+            return
+        if publishers:
+            offered = OfferedProfiles.from_rclpy(p.qos_profile for p in publishers)
+            type_hash = str(publishers[0].topic_type_hash)
+        else:  # the publisher is already gone: record what manip_kin's publishers offer
+            latched = topic in LATCHED_TOPICS
+            offered = default_offer(transient_local=latched, depth=1 if latched else 10)
+            type_hash = ""
+        self._writer.add_topic(
+            topic,
+            type_name,
+            offered_qos_profiles=offered,
+            # An unset hash (a publisher from before Iron) is not RIHS01: use the local one.
+            type_description_hash=type_hash if type_hash.startswith("RIHS01_") else None,
+        )
+
+    def _resubscribe(self, entry: _RawTopic, publishers: list, types: list[str]) -> None:
+        """Replace a pre-subscription by one whose QoS matches the publishers found."""
+        with self._lock:
+            del self._topics[entry.name]
+        if entry.lost_event is not None:
+            entry.lost_event.destroy_when_not_in_use()
+        entry.handle.destroy_when_not_in_use()
+        self._subscribe(entry.name, publishers, types)
 
     def _flush_if_due(self) -> None:
         with self._lock:
@@ -308,6 +358,8 @@ class RecorderNode(Node):
             ):
                 return False
             received = info.get("received_timestamp") or time.time_ns()
+            if not self._writer.has_topic(entry.name):
+                self._add_channel(entry.name, entry.type_name, self.get_publishers_info_by_topic(entry.name))
             self._writer.write_raw(
                 entry.name, data, received, source_time_ns=info.get("source_timestamp") or None
             )
@@ -352,7 +404,8 @@ class RecorderNode(Node):
             dropped_text = (
                 f"{total} dropped ({', '.join(f'{t}: {n}' for t, n in dropped.items() if n)})" if total else "0 dropped"
             )
-            missing = [] if self._all_topics else sorted(self._wanted - set(self._topics))
+            heard = {name for name, entry in self._topics.items() if entry.received}
+            missing = [] if self._all_topics else sorted(self._wanted - heard)
             missing_text = f"; never published: {' '.join(missing)}" if missing else ""
             self._finished_line = f"{summary.one_line()}; {dropped_text}{missing_text}"
         return self._finished_line
