@@ -40,7 +40,7 @@ from manip_kin.errors import InvalidArgumentError, JointCountError, NonFiniteErr
 from manip_kin.fast_step import compile_step
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
-from manip_kin.rotations import matrix_to_rotvec
+from manip_kin.rotations import matrix_to_rotvec, quaternion_from_entries
 from manip_kin.tasks import Task, parse_task
 from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
 
@@ -122,26 +122,11 @@ class ControlOutput:
 
 
 def _rotvec_of(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float]:
-    """Rotation vector of a rotation matrix given by its entries (same math as
-    :func:`manip_kin.rotations.matrix_to_rotvec`: Shepperd's quaternion, then
-    ``2 atan2(|v|, w) v / |v|``, exact near 0 and π)."""
-    trace = m00 + m11 + m22
-    if trace >= m00 and trace >= m11 and trace >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
-        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
-    elif m00 >= m11 and m00 >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
-    elif m11 >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
-    else:
-        s = 2.0 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
-    if w < 0.0:  # the quaternion with w >= 0 gives the angle in [0, π]
-        x, y, z, w = -x, -y, -z, -w
+    """Rotation vector of a rotation matrix given by its entries (the math of
+    :func:`manip_kin.rotations.matrix_to_rotvec` on plain floats: ``2 atan2(|v|, w) v / |v|``
+    of the quaternion, exact near 0 and π)."""
+    x, y, z, w = quaternion_from_entries(m00, m01, m02, m10, m11, m12, m20, m21, m22)
     vector_norm = math.sqrt(x * x + y * y + z * z)
-    # The quaternion need not be normalised: both branches are scale-invariant.
     if vector_norm < 1e-8 * abs(w):
         scale = 2.0 / w
     else:

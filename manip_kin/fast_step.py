@@ -27,7 +27,6 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.unrolled_linalg import (
-    _cholesky_body,
     _determinant_and_trace,
     _inverse_trace_lines,
     _product,

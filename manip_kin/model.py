@@ -23,7 +23,7 @@ from enum import Enum
 import numpy as np
 
 from manip_kin.errors import JointCountError, ModelFileError, UnknownFrameError, check_finite
-from manip_kin.rotations import rot_z
+from manip_kin.rotations import rot_z, rotation_z_onto
 
 
 class JointType(str, Enum):
@@ -67,19 +67,6 @@ class Joint:
         return self.type is JointType.REVOLUTE
 
 
-def _align_z_to(axis: np.ndarray) -> np.ndarray:
-    """A rotation taking the z axis onto the unit ``axis`` (shortest arc), shape (3, 3)."""
-    z = np.array([0.0, 0.0, 1.0])
-    cross = np.cross(z, axis)
-    sin_angle = float(np.linalg.norm(cross))
-    cos_angle = float(axis @ z)
-    if sin_angle < 1e-12:
-        return np.eye(3) if cos_angle > 0 else np.diag([1.0, -1.0, -1.0])
-    k = cross / sin_angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + sin_angle * kx + (1.0 - cos_angle) * (kx @ kx)
-
-
 @dataclass(frozen=True)
 class ChainArrays:
     """Joint-independent arrays that make per-call kinematics a few numpy calls.
@@ -112,7 +99,7 @@ def _compile_chain(joints: tuple[Joint, ...], ee_offset: np.ndarray) -> ChainArr
     previous_post = np.eye(4)
     for i, joint in enumerate(joints):
         align = np.eye(4)
-        align[:3, :3] = _align_z_to(joint.axis)
+        align[:3, :3] = rotation_z_onto(joint.axis)
         # origin · Rot(axis, q) = (origin · A) · Rz(q) · Aᵀ with A z-to-axis.
         fixed[i] = previous_post @ joint.origin @ align
         unalign = np.eye(4)
@@ -310,7 +297,7 @@ def joint_motion(joint: Joint, position: float) -> np.ndarray:
     motion = np.eye(4)
     axis = np.asarray(joint.axis, dtype=float)
     if joint.is_revolute:
-        align = _align_z_to(axis)
+        align = rotation_z_onto(axis)
         motion[:3, :3] = align @ rot_z(position) @ align.T
     else:
         motion[:3, 3] = axis * position

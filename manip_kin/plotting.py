@@ -276,12 +276,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     # 6. 3D path and arm snapshots
     figure = plt.figure(figsize=(8, 7))
     axis = figure.add_subplot(projection="3d")
-    if len(run.tool.time):
-        axis.plot(*run.tool.position.T, label="tool path", color="tab:blue")
-    for k, line in enumerate(run.planned_paths):
-        axis.plot(*line.T, linestyle="--", color="tab:orange", label="planned line" if k == 0 else None)
-    if len(run.goal.time):
-        axis.scatter(*run.goal.position.T, s=4, color="tab:green", alpha=0.3, label="goal poses")
+    drawn = []  # every plotted point, for equal axis scales
     if model is not None and len(run.joint_time):
         from manip_kin.kinematics import frame_poses
 
@@ -291,9 +286,26 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
             if q.shape[0] != model.dof:
                 break
             origins = frame_poses(model, q)[:, :3, 3]
-            shade = 0.25 + 0.6 * k / max(1, len(instants) - 1)
-            axis.plot(*origins.T, marker="o", markersize=3, color=(shade, shade, shade),
+            shade = 0.2 + 0.6 * k / max(1, len(instants) - 1)
+            axis.plot(*origins.T, marker="o", markersize=3, color=(shade, shade, shade), linewidth=1.5,
                       label=f"arm at t = {run.joint_time[sample]:.1f} s")
+            drawn.append(origins)
+    if len(run.goal.time):
+        axis.scatter(*run.goal.position.T, s=2, color="tab:green", alpha=0.2, label="goal poses")
+    if len(run.tool.time):
+        axis.plot(*run.tool.position.T, label="tool path", color="tab:blue", linewidth=2.5)
+        drawn.append(run.tool.position)
+    for k, line in enumerate(run.planned_paths):
+        axis.plot(*line.T, linestyle="--", color="tab:orange", linewidth=2, label="planned line" if k == 0 else None)
+    if drawn:
+        # Equal scales on x, y and z, so a straight line and the arm's proportions look as they are.
+        points = np.vstack(drawn)
+        centre = (points.max(axis=0) + points.min(axis=0)) / 2
+        half = max(float((points.max(axis=0) - points.min(axis=0)).max()) / 2, 0.05)
+        axis.set_xlim(centre[0] - half, centre[0] + half)
+        axis.set_ylim(centre[1] - half, centre[1] + half)
+        axis.set_zlim(centre[2] - half, centre[2] + half)
+        axis.set_box_aspect((1, 1, 1))
     axis.set_xlabel("x [m]")
     axis.set_ylabel("y [m]")
     axis.set_zlabel("z [m]")

@@ -116,26 +116,37 @@ def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> n
 # --- quaternions ---------------------------------------------------------------------------
 
 
-def matrix_to_quat(rotation) -> np.ndarray:
-    """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a rotation matrix (Shepperd's method)."""
-    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(rotation, dtype=float).tolist()
+def quaternion_from_entries(
+    m00: float, m01: float, m02: float, m10: float, m11: float, m12: float, m20: float, m21: float, m22: float
+) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a rotation matrix given by its entries.
+
+    Shepperd's method on plain floats (control loops call it where a numpy round trip
+    would cost more than the arithmetic): it divides by the largest of the four candidate
+    components, so there is no cancellation anywhere.
+    """
     trace = m00 + m11 + m22
-    # Divide by the largest of the four candidate components: no cancellation anywhere.
-    if trace >= max(m00, m11, m22):
+    if trace >= m00 and trace >= m11 and trace >= m22:
         s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
-        q = (( m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s)
+        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
     elif m00 >= m11 and m00 >= m22:
         s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        q = (0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s)
+        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
     elif m11 >= m22:
         s = 2.0 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        q = ((m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s)
+        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
     else:
         s = 2.0 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        q = ((m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s)
-    quat = np.array(q)
-    quat /= np.linalg.norm(quat)
-    return -quat if quat[3] < 0.0 else quat
+        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    return x / norm, y / norm, z / norm, w / norm
+
+
+def matrix_to_quat(rotation) -> np.ndarray:
+    """Unit quaternion ``(x, y, z, w)`` with ``w >= 0`` of a rotation matrix (Shepperd's method)."""
+    return np.array(quaternion_from_entries(*np.asarray(rotation, dtype=float).ravel().tolist()))
 
 
 def quat_to_matrix(quat) -> np.ndarray:
@@ -228,6 +239,18 @@ def matrix_to_angle_axis(rotation) -> tuple[float, np.ndarray]:
     if angle < 1e-15:
         return 0.0, np.array([0.0, 0.0, 1.0])
     return angle, rotvec / angle
+
+
+def rotation_z_onto(direction) -> np.ndarray:
+    """The shortest-arc rotation taking the z axis onto the unit vector ``direction``, shape (3, 3)."""
+    direction = np.asarray(direction, dtype=float)
+    cross = np.array([-direction[1], direction[0], 0.0])  # z × direction
+    sin_angle = float(np.linalg.norm(cross))
+    cos_angle = float(direction[2])
+    if sin_angle < 1e-12:
+        return np.eye(3) if cos_angle > 0 else np.diag([1.0, -1.0, -1.0])
+    k = skew(cross / sin_angle)
+    return np.eye(3) + sin_angle * k + (1.0 - cos_angle) * (k @ k)
 
 
 # --- homogeneous transforms and SE(3) ----------------------------------------------------------

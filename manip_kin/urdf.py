@@ -47,7 +47,7 @@ import numpy as np
 
 from manip_kin.errors import ModelFileError
 from manip_kin.model import Joint, JointType, RobotModel
-from manip_kin.rotations import transform_from_xyz_rpy
+from manip_kin.rotations import rotation_z_onto, transform_from_xyz_rpy
 
 __all__ = [
     "example_robot_data_urdf",
@@ -494,19 +494,6 @@ def _origin_element(parent: ET.Element, transform: np.ndarray) -> None:
     )
 
 
-def _rotation_z_onto(direction: np.ndarray) -> np.ndarray:
-    """A rotation taking the z axis onto the unit ``direction``, shape (3, 3)."""
-    z = np.array([0.0, 0.0, 1.0])
-    cross = np.cross(z, direction)
-    sin_angle = float(np.linalg.norm(cross))
-    cos_angle = float(direction @ z)
-    if sin_angle < 1e-12:
-        return np.eye(3) if cos_angle > 0 else np.diag([1.0, -1.0, -1.0])
-    k = cross / sin_angle
-    k_cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + sin_angle * k_cross + (1.0 - cos_angle) * (k_cross @ k_cross)
-
-
 def _add_visual(link: ET.Element, transform: np.ndarray, shape: str, material: str, **size: float) -> None:
     visual = ET.SubElement(link, "visual")
     _origin_element(visual, transform)
@@ -521,7 +508,7 @@ def _add_segment(link: ET.Element, end: np.ndarray) -> None:
     if length < 1e-6:
         return
     pose = np.eye(4)
-    pose[:3, :3] = _rotation_z_onto(end / length)
+    pose[:3, :3] = rotation_z_onto(end / length)
     pose[:3, 3] = end / 2.0  # a URDF cylinder is centred on its origin, along its z axis
     _add_visual(link, pose, "cylinder", "manip_kin_link", radius=_LINK_RADIUS, length=length)
 

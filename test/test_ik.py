@@ -40,13 +40,11 @@ def task_errors(model, q, target, rows) -> tuple[float, float]:
     return float(np.linalg.norm(error[[r for r in rows if r < 3]])), float(np.linalg.norm(error[[r for r in rows if r >= 3]]))
 
 
-def panda_or_skip():
-    try:
-        from manip_kin.urdf import example_robot_data_urdf, load_urdf
+def panda():
+    """The Franka Panda from example-robot-data (a test dependency)."""
+    from manip_kin.urdf import example_robot_data_urdf, load_urdf
 
-        return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"))
-    except (ImportError, FileNotFoundError) as error:  # pragma: no cover - environment dependent
-        pytest.skip(f"Panda URDF not available: {error}")
+    return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"))
 
 
 # --- robots.md scenarios ------------------------------------------------------------------
@@ -200,7 +198,7 @@ def test_ik_solves_targets_from_random_configurations(robot):
 
 
 def test_ik_solves_panda_targets_from_random_configurations():
-    model = panda_or_skip()
+    model = panda()
     success_rate, mean_iterations = _property_run(model, 60, seed=31)
     assert success_rate == 1.0
     assert mean_iterations <= ITERATION_BOUNDS["panda"]
@@ -344,7 +342,7 @@ def test_bad_arguments_raise_clear_errors():
 def test_generated_iteration_matches_the_plain_python_one(robot):
     from manip_kin import ik
 
-    model = panda_or_skip() if robot == "panda" else load_robot(robot)
+    model = panda() if robot == "panda" else load_robot(robot)
     rng = np.random.default_rng(50)
     task = parse_task(None, model)
     problem = ik._problem(model, model.frame_index(model.default_frame), task)

@@ -37,9 +37,9 @@ ROBOTS = ["genova7", "mocom7", "irb120", "rpp", "scara"]
 
 
 def _panda():
-    urdf = pytest.importorskip("manip_kin.urdf")
-    path = urdf.example_robot_data_urdf("panda_description/urdf/panda.urdf")
-    return urdf.load_urdf(path, tip_link="panda_hand")
+    from manip_kin.urdf import example_robot_data_urdf, load_urdf
+
+    return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"), tip_link="panda_hand")
 
 
 def _model(name):
@@ -230,7 +230,7 @@ def _numeric_jacobians(model, q, frame):
     out = {kind: np.zeros((6, n)) for kind in JACOBIAN_KINDS}
     for i in range(n):
         derivative = numeric_derivative(lambda x: frame_pose(model, x, frame), q, i)
-        rotation, position = pose[:3, :3], pose[:3, 3]
+        rotation = pose[:3, :3]
         omega = unskew(derivative[:3, :3] @ rotation.T)
         velocity = derivative[:3, 3]
         out["geometric"][:, i] = np.concatenate([omega, velocity])

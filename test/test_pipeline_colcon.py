@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -17,28 +14,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """A colcon build of this package: (lib dir of the executables, environment of setup.bash)."""
-    colcon = Path(sys.executable).parent / "colcon"
-    if not colcon.exists():
-        colcon = shutil.which("colcon")
-    if colcon is None:
-        pytest.skip("colcon is not installed")
-    workspace = tmp_path_factory.mktemp("colcon_pipeline_ws")
-    result = subprocess.run(
-        [str(colcon), "build", "--base-paths", str(REPO), "--build-base", "build", "--install-base", "install",
-         "--packages-select", "manip_kin", "--event-handlers", "console_direct-"],
-        cwd=workspace, env=dict(os.environ, COLCON_HOME=str(workspace / ".colcon")),
-        capture_output=True, text=True, timeout=300,
-    )
-    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    prefix = workspace / "install" / "manip_kin"
-    site = next(prefix.glob("lib/python3*/site-packages"))
-    env = dict(os.environ)
-    # What install/setup.bash puts in front: the package's site-packages and prefix.
-    env["PYTHONPATH"] = os.pathsep.join([str(site), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix), env.get("AMENT_PREFIX_PATH", sys.prefix)])
-    return prefix / "lib" / "manip_kin", prefix / "share" / "manip_kin", env
+def installed(colcon_install):
+    """(lib dir of the executables, share dir, environment of setup.bash)."""
+    return colcon_install.lib, colcon_install.share, colcon_install.env
 
 
 def test_installed_pipeline_reaches_goal(installed, tmp_path):

@@ -61,14 +61,14 @@ def test_recorder_summary_reports_no_loss(recorded_run):
 
 
 def test_rosbags_reads_every_message_the_test_saw_with_the_same_values(recorded_run):
-    rosbags_highlevel = pytest.importorskip("rosbags.highlevel")
+    from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
     path, seen_states, seen_tool, _ = recorded_run
     assert len(seen_states) > 200 and len(seen_tool) > 200
     recorded_states: dict[tuple[int, int], np.ndarray] = {}
     recorded_tool: dict[tuple[int, int], np.ndarray] = {}
-    with rosbags_highlevel.AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         connections = [c for c in reader.connections if c.topic in ("/joint_states", "/tool_pose")]
         for connection, _timestamp, raw in reader.messages(connections=connections):
             message = reader.deserialize(raw, connection.msgtype)

@@ -144,3 +144,19 @@ def test_pseudo_inverses_left_right_plain_and_damped():
     # a rank-deficient matrix still gives a finite damped inverse
     singular = np.array([[1.0, 0.0], [1.0, 0.0]])
     assert np.all(np.isfinite(damped_right_pinv(singular, 0.1)))
+
+
+@given(unit_vectors)
+def test_rotation_z_onto_maps_z_to_the_direction(direction):
+    from manip_kin.rotations import rotation_z_onto
+
+    rotation = rotation_z_onto(direction)
+    np.testing.assert_allclose(rotation @ [0, 0, 1], direction, atol=1e-12)
+    np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(rotation) == pytest.approx(1.0)
+
+
+def test_rotation_z_onto_minus_z_is_a_half_turn():
+    from manip_kin.rotations import rotation_z_onto
+
+    np.testing.assert_allclose(rotation_z_onto([0, 0, -1]) @ [0, 0, 1], [0, 0, -1], atol=0)

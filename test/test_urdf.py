@@ -303,13 +303,9 @@ def joint_list_model() -> RobotModel:
 
 
 def _bundled_models() -> list:
-    try:
-        from manip_kin.robots import bundled_robot_names, load_robot
+    from manip_kin.robots import bundled_robot_names
 
-        names = bundled_robot_names()
-    except Exception:  # noqa: BLE001 - another module of the package, possibly unfinished
-        return [pytest.param(None, marks=pytest.mark.skip(reason="manip_kin.robots not available"))]
-    return [pytest.param(name, id=name) for name in names]
+    return [pytest.param(name, id=name) for name in bundled_robot_names()]
 
 
 def _reload(model: RobotModel) -> RobotModel:

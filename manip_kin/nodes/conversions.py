@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.errors import ManipKinError
-from manip_kin.rotations import matrix_to_quat
+from manip_kin.rotations import matrix_to_quat, quaternion_from_entries
 
 #: Default tolerance on ``| |q| - 1 |`` for a goal quaternion: hand-typed quaternions
 #: such as ``0 0.707 0 0.707`` pass, a zero or unnormalised one does not.
@@ -424,31 +424,10 @@ def _stamp_parts(stamp_ns: int) -> tuple[int, int]:
 
 
 def quaternion_of_pose_values(values) -> tuple[float, float, float, float]:
-    """Unit quaternion ``(x, y, z, w)``, ``w >= 0``, of the rotation in a row-major 4x4 pose.
-
-    Plain-float Shepperd method (the same as :func:`manip_kin.rotations.matrix_to_quat`)
-    for the loops, where a numpy round trip costs more than the arithmetic.
-    """
-    m00, m01, m02 = values[0], values[1], values[2]
-    m10, m11, m12 = values[4], values[5], values[6]
-    m20, m21, m22 = values[8], values[9], values[10]
-    trace = m00 + m11 + m22
-    if trace >= m00 and trace >= m11 and trace >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
-        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
-    elif m00 >= m11 and m00 >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
-    elif m11 >= m22:
-        s = 2.0 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
-    else:
-        s = 2.0 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    if w < 0.0:
-        norm = -norm
-    return x / norm, y / norm, z / norm, w / norm
+    """Unit quaternion ``(x, y, z, w)``, ``w >= 0``, of the rotation in a row-major 4x4 pose."""
+    return quaternion_from_entries(
+        values[0], values[1], values[2], values[4], values[5], values[6], values[8], values[9], values[10]
+    )
 
 
 class PoseStampedCdr:
