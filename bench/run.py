@@ -29,26 +29,32 @@ sys.path.insert(0, str(HERE))
 SECTIONS = ("core", "motion", "nodes", "recorder")
 
 
-def _time_calls(function, arguments, repeats: int, block: int = 50) -> dict:
+def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
     """Per-call time [µs] of ``function(arg)``, cycling through ``arguments``.
 
     Calls are timed in blocks of ``block`` (as timeit does) so the clock's own cost does not
-    count; the median and p90 are over the block means.
+    count. This VM's speed drifts between runs (another tenant, frequency), so the
+    measurement is repeated ``rounds`` times: ``median_us``/``p90_us`` are the block-mean
+    statistics of the fastest round, ``median_us_slowest_round`` shows the drift.
     """
     for argument in arguments[:200]:  # warm-up: code generation, caches
         function(argument)
-    blocks = max(1, repeats // block)
-    means = np.empty(blocks)
     count = len(arguments)
     clock = time.perf_counter_ns
-    for b in range(blocks):
-        chunk = [arguments[(b * block + i) % count] for i in range(block)]
-        start = clock()
-        for argument in chunk:
-            function(argument)
-        means[b] = (clock() - start) / block
-    means /= 1000.0
-    return {"median_us": float(np.median(means)), "p90_us": float(np.percentile(means, 90))}
+    results = []
+    for _ in range(rounds):
+        blocks = max(1, repeats // block)
+        means = np.empty(blocks)
+        for b in range(blocks):
+            chunk = [arguments[(b * block + i) % count] for i in range(block)]
+            start = clock()
+            for argument in chunk:
+                function(argument)
+            means[b] = (clock() - start) / block
+        means /= 1000.0
+        results.append((float(np.median(means)), float(np.percentile(means, 90))))
+    results.sort()
+    return {"median_us": results[0][0], "p90_us": results[0][1], "median_us_slowest_round": results[-1][0]}
 
 
 def panda_model():
@@ -114,14 +120,29 @@ def bench_nodes() -> list[dict]:
 
 
 def bench_recorder() -> list[dict]:
-    from manip_kin.recording import benchmark_writer
+    from manip_kin.recording import benchmark_recorder, benchmark_writer
 
-    rows = [{"metric": "MCAP write cost per JointState", **benchmark_writer(20_000), "target": "", "reference": "straightforward Python writer ~19 µs"}]
-    try:
-        from bench_recorder import run_recorder_benchmark
-    except ImportError:
-        return rows
-    return rows + run_recorder_benchmark()
+    rows = [
+        {
+            "metric": "MCAP write cost per JointState",
+            **benchmark_writer(20_000),
+            "target": "",
+            "reference": "straightforward Python writer ~19 µs",
+        }
+    ]
+    for topics in (1, 8):
+        live = benchmark_recorder(rate_hz=1000.0, duration_s=8.0, n_topics=topics, depth=1000)
+        summary = live.pop("recorder_summary", "")
+        rows.append(
+            {
+                "metric": f"recorder, {topics} topic(s) x 1 kHz",
+                **{k: v for k, v in live.items() if k in ("published", "recorded", "lost", "recorder_cpu_percent", "published_messages_per_s")},
+                "target": "zero loss at ≤ 30 % of one core (8 topics)",
+                "reference": "rclpy ~5k msg/s to one subscriber",
+            }
+        )
+        print(f"[bench] {summary}", file=sys.stderr)
+    return rows
 
 
 def _format_value(row: dict) -> str:
