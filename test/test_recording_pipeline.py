@@ -53,11 +53,9 @@ def recorded_run(tmp_path_factory):
 
 def test_recorder_summary_reports_no_loss(recorded_run):
     _, _, _, summary = recorded_run
-    # Every topic the pipeline streams arrives without loss (/diagnostics is bursty and has
-    # several publishers; a drop there would be named after "dropped").
-    assert "recorded" in summary, summary
-    for topic in ("/joint_states", "/tool_pose", "/ee_pose", "/tool_twist", "/joint_velocity_commands"):
-        assert f"{topic}:" not in summary, summary
+    # Nothing lost, and /diagnostics (three publishers numbering their own messages) is not
+    # mistaken for a lossy topic.
+    assert "recorded" in summary and "; 0 dropped" in summary, summary
 
 
 def test_rosbags_reads_every_message_the_test_saw_with_the_same_values(recorded_run):

@@ -368,7 +368,12 @@ class RecorderNode(Node):
         sequence = info.get("publication_sequence_number")
         if sequence:
             if entry.last_sequence is not None and entry.single_publisher and sequence > entry.last_sequence + 1:
-                entry.sequence_gaps += sequence - entry.last_sequence - 1
+                # A second publisher that discovery has not reported yet numbers its own
+                # messages: ask the graph before calling the gap a loss.
+                if len(self.get_publishers_info_by_topic(entry.name)) <= 1:
+                    entry.sequence_gaps += sequence - entry.last_sequence - 1
+                else:
+                    entry.single_publisher = False
             entry.last_sequence = sequence  # a restarted publisher counts from 1 again: no gap
         if self._max_messages and count >= self._max_messages:
             self._stop(f"max_messages ({self._max_messages}) reached")
