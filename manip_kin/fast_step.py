@@ -36,6 +36,9 @@ from manip_kin.unrolled_linalg import (
     jacobian_entries,
 )
 
+# Functions the generated sources call by these names.
+_GENERATED_MATH = {"sqrt": math.sqrt, "atan2": math.atan2, "cos": math.cos, "sin": math.sin}
+
 # Locals of the generated step: upper-case names and the solver's (a, b, d, l, p, r, x, y
 # with digits). The chain's own locals (q0.., c0.., s0.., v0.. today) must not be among
 # them: checked on generation.
@@ -234,10 +237,7 @@ def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: t
     except ValueError:
         return None
     namespace: dict = {
-        "sqrt": math.sqrt,
-        "atan2": math.atan2,
-        "cos": math.cos,
-        "sin": math.sin,
+        **_GENERATED_MATH,
         "array": np.array,
         "NEW": object.__new__,
         "OUTPUT": output_class,
@@ -344,10 +344,7 @@ def compile_ik_iteration(
     except ValueError:
         return None
     namespace: dict = {
-        "sqrt": math.sqrt,
-        "atan2": math.atan2,
-        "cos": math.cos,
-        "sin": math.sin,
+        **_GENERATED_MATH,
         "ceil": math.ceil,
         "TWO_PI": 2.0 * math.pi,
     }
