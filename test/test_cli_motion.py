@@ -197,7 +197,6 @@ def test_bad_input_is_one_line_and_exit_2(capsys, argv, fragment):
 # --- the installed executable ---------------------------------------------------------------
 
 
-@pytest.mark.skipif(not EXECUTABLE.exists(), reason="manip_kin console script not installed")
 def test_executable_ik_and_simulate_json():
     ik = subprocess.run(
         [str(EXECUTABLE), "ik", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--seed", "1", "--json"],
