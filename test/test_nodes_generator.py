@@ -147,4 +147,6 @@ def test_new_target_preempts_from_current_pose(harness):
     assert harness.spin_until(lambda: len(paths) >= 2, 3, every=stream)
     np.testing.assert_allclose(conv.pose_stamped_to_matrix(paths[-1].poses[0]), moved, atol=1e-6)
     assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
+    # The final pose is published as the line ends; let it arrive before looking at it.
+    harness.spin_until(lambda: np.allclose(conv.pose_stamped_to_matrix(goals[-1]), second, atol=1e-12), 1, every=stream)
     np.testing.assert_allclose(conv.pose_stamped_to_matrix(goals[-1]), second, atol=1e-12)

@@ -79,33 +79,54 @@ def _format_errors(errors: dict) -> str:
     return f"position error {errors['position']:.3g} m, orientation error {errors['orientation']:.3g} rad"
 
 
+def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str, ...]):
+    """Publish the pose with ``send``; with ``--wait``, first hear each node's /diagnostics.
+
+    Returns:
+        ``(start time, stamp, payload)`` once delivered, or an exit code when done.
+    """
+    from manip_kin.pipeline import PipelineError
+
+    pose = pose_from_args(args)
+    try:
+        if args.wait:
+            # A status from each node proves /diagnostics is matched before the pose goes out.
+            for node in ready_nodes:
+                client.wait_status(node, args.timeout)
+        start = time.monotonic()
+        stamp = send(pose, timeout=args.timeout)
+    except PipelineError as error:
+        print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    payload = {"topic": topic, "stamp": stamp, "xyz": pose[:3, 3].tolist(), "frame": args.frame}
+    if not args.wait:
+        _report(args, payload, f"{label} {pose[:3, 3].round(4).tolist()} delivered on {topic} (stamp {stamp})")
+        return 0
+    return start, stamp, payload
+
+
+def _await_convergence(args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, suffix: str = "") -> int:
+    """Wait for the controller to report ``goal_stamp`` converged; report; 0 or 1."""
+    converged, status = client.wait_converged(goal_stamp, timeout)
+    elapsed = time.monotonic() - start
+    errors = _errors(status)
+    payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
+    verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
+    _report(args, payload, f"{label} {verdict}{suffix}: {_format_errors(errors)}")
+    return 0 if converged else 1
+
+
 def run_goal(args: argparse.Namespace) -> int:
     """``manip_kin goal``."""
-    from manip_kin.pipeline import PipelineClient, PipelineError
+    from manip_kin.pipeline import PipelineClient
 
     _check_timeout(args)
-    pose = pose_from_args(args)
     with PipelineClient(watch_state=False, base_frame=args.frame) as client:
-        try:
-            if args.wait:
-                # A status from the controller proves /diagnostics is matched before the goal goes out.
-                client.wait_status("cartesian_controller", args.timeout)
-            start = time.monotonic()
-            stamp = client.send_goal(pose, timeout=args.timeout)
-        except PipelineError as error:
-            print(f"manip_kin goal: error: {error}", file=sys.stderr)
-            return 2
-        payload = {"topic": "/goal_pose", "stamp": stamp, "xyz": pose[:3, 3].tolist(), "frame": args.frame}
-        if not args.wait:
-            _report(args, payload, f"goal {pose[:3, 3].round(4).tolist()} delivered on /goal_pose (stamp {stamp})")
-            return 0
-        converged, status = client.wait_converged(stamp, args.timeout)
-        elapsed = time.monotonic() - start
-        errors = _errors(status)
-        payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
-        verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
-        _report(args, payload, f"goal {verdict}: {_format_errors(errors)}")
-        return 0 if converged else 1
+        delivered = _deliver(args, client, client.send_goal, "/goal_pose", "goal", ("cartesian_controller",))
+        if isinstance(delivered, int):
+            return delivered
+        start, stamp, payload = delivered
+        return _await_convergence(args, client, stamp, start, payload, "goal", args.timeout)
 
 
 def run_line(args: argparse.Namespace) -> int:
@@ -113,21 +134,13 @@ def run_line(args: argparse.Namespace) -> int:
     from manip_kin.pipeline import PipelineClient, PipelineError
 
     _check_timeout(args)
-    pose = pose_from_args(args)
     with PipelineClient(watch_state=False, base_frame=args.frame) as client:
-        try:
-            if args.wait:
-                client.wait_status("trajectory_generator", args.timeout)
-                client.wait_status("cartesian_controller", args.timeout)
-            start = time.monotonic()
-            stamp = client.send_line(pose, timeout=args.timeout)
-        except PipelineError as error:
-            print(f"manip_kin line: error: {error}", file=sys.stderr)
-            return 2
-        payload = {"topic": "/line_target", "stamp": stamp, "xyz": pose[:3, 3].tolist(), "frame": args.frame}
-        if not args.wait:
-            _report(args, payload, f"line target {pose[:3, 3].round(4).tolist()} delivered on /line_target (stamp {stamp})")
-            return 0
+        delivered = _deliver(
+            args, client, client.send_line, "/line_target", "line target", ("trajectory_generator", "cartesian_controller")
+        )
+        if isinstance(delivered, int):
+            return delivered
+        start, stamp, payload = delivered
         try:
             generator = client.wait_line_done(stamp, args.timeout)
         except PipelineError as error:
@@ -136,18 +149,9 @@ def run_line(args: argparse.Namespace) -> int:
         if generator.values.get("rejected_stamp") == stamp:
             print(f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr)
             return 2
-        line_time = time.monotonic() - start
-        remaining = max(args.timeout - line_time, 0.1)
-        converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining)
-        elapsed = time.monotonic() - start
-        errors = _errors(status)
-        payload.update(
-            converged=converged,
-            time=elapsed,
-            line_duration=generator.number("duration"),
-            final_error=errors,
-            state=status.message if status else None,
+        payload["line_duration"] = generator.number("duration")
+        remaining = max(args.timeout - (time.monotonic() - start), 0.1)
+        return _await_convergence(
+            args, client, generator.values["final_goal_stamp"], start, payload, "line", remaining,
+            suffix=f" (line {payload['line_duration']:.2f} s)",
         )
-        verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
-        _report(args, payload, f"line {verdict} (line {payload['line_duration']:.2f} s): {_format_errors(errors)}")
-        return 0 if converged else 1
