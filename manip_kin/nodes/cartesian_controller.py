@@ -14,7 +14,6 @@ import sys
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -22,7 +21,7 @@ from manip_kin.control import CartesianController, ControllerConfig, ControlOutp
 from manip_kin.errors import ManipKinError
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
-from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.runner import run_node
 from manip_kin.robots import load_robot
 
@@ -75,7 +74,7 @@ USAGE = usage_text(
 )
 
 
-class CartesianControllerNode(Node):
+class CartesianControllerNode(LoopingNode):
     """ROS handles around one :class:`~manip_kin.control.CartesianController`."""
 
     def __init__(self, **node_kwargs):
@@ -130,15 +129,12 @@ class CartesianControllerNode(Node):
         self._last_diagnostics_ns = 0
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
 
-        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
         self.get_logger().info(
             f"robot {self.model.name}: controlling frame {self.model.frame_name(self.controller.frame_index)!r} "
             f"at {self.rate_hz:g} Hz, gains {config.gain_angular:g}/{config.gain_linear:g} 1/s, "
             f"goals in frame {self.base_frame!r}"
         )
-        if self.loop.realtime_priority:
-            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
-        self.loop.start()
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -239,16 +235,6 @@ class CartesianControllerNode(Node):
         level = {"stale input": "warn", "singular": "warn", "joint-limited": "ok"}.get(self.state, "ok")
         status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
-
-    def _on_loop_error(self, error: BaseException) -> None:
-        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
-            self.loop.stop(timeout=0.0)
-            return
-        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
-
-    def stop(self) -> None:
-        """Stop the loop thread (before the node is destroyed)."""
-        self.loop.stop()
 
 
 def main(argv=None) -> int:

@@ -229,6 +229,33 @@ class RateLoop:
         )
 
 
+class LoopingNode(Node):
+    """A node whose periodic work runs in one :class:`RateLoop` thread.
+
+    Subclasses set ``self._warn`` (a :class:`ThrottledLog`) and call :meth:`start_loop` at
+    the end of their constructor; ``main()`` calls :meth:`stop` before the node is destroyed.
+    """
+
+    loop: RateLoop
+
+    def start_loop(self, rate_hz: float, cycle: Callable[[int], None], realtime_priority: int = 0) -> None:
+        """Start ``cycle(now_ns)`` at ``rate_hz`` [Hz] in the loop thread."""
+        self.loop = RateLoop(rate_hz, cycle, self._on_loop_error, name=self.get_name(), realtime_priority=realtime_priority)
+        if self.loop.realtime_priority:
+            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
+        self.loop.start()
+
+    def _on_loop_error(self, error: BaseException) -> None:
+        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
+            self.loop.stop(timeout=0.0)
+            return
+        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
+
+    def stop(self) -> None:
+        """Stop the loop thread (before the node is destroyed)."""
+        self.loop.stop()
+
+
 def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
     """Loop statistics as ``(key, value)`` text pairs for a ``DiagnosticStatus``."""
     return [

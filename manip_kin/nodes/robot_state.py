@@ -14,7 +14,6 @@ import time
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -24,7 +23,7 @@ from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
-from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.runner import run_node
 from manip_kin.robots import bundled_robot_names, load_robot
 
@@ -201,7 +200,7 @@ def initial_positions(model: RobotModel, values) -> np.ndarray:
     return q
 
 
-class RobotStateNode(Node):
+class RobotStateNode(LoopingNode):
     """ROS handles around one :class:`JointIntegrator`."""
 
     def __init__(self, **node_kwargs):
@@ -238,14 +237,11 @@ class RobotStateNode(Node):
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
 
         self._publish_description()
-        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
         self.get_logger().info(
             f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, "
             f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
         )
-        if self.loop.realtime_priority:
-            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
-        self.loop.start()
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
 
     def _publish_description(self) -> None:
         try:
@@ -254,12 +250,6 @@ class RobotStateNode(Node):
             self.get_logger().warning(f"/robot_description not published: {error}")
             return
         self._description_pub.publish(String(data=model_to_urdf(self.model)))
-
-    def _on_loop_error(self, error: BaseException) -> None:
-        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
-            self.loop.stop(timeout=0.0)
-            return
-        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
 
     def _take_commands(self, now_ns: int) -> None:
         dof = self.model.dof
@@ -315,10 +305,6 @@ class RobotStateNode(Node):
         level = "warn" if limited or self.rejected_commands else "ok"
         status = conv.make_diagnostic_status(self.get_name(), level, command_state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(stamp, [status]))
-
-    def stop(self) -> None:
-        """Stop the loop thread (before the node is destroyed)."""
-        self.loop.stop()
 
 
 def main(argv=None) -> int:

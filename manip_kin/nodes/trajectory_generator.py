@@ -19,14 +19,13 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Path
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from manip_kin.errors import ManipKinError
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
-from manip_kin.nodes.rate_loop import PolledSubscription, RateLoop, ThrottledLog, stats_key_values
+from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.runner import run_node
 from manip_kin.robots import load_robot
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, check_line_reachable
@@ -77,7 +76,7 @@ USAGE = usage_text(
 )
 
 
-class TrajectoryGeneratorNode(Node):
+class TrajectoryGeneratorNode(LoopingNode):
     """ROS handles around the running :class:`~manip_kin.trajectory.LineTrajectory`."""
 
     def __init__(self, **node_kwargs):
@@ -129,14 +128,11 @@ class TrajectoryGeneratorNode(Node):
         self._warn = ThrottledLog(self.get_logger().warning, 0.5)
         self._error = ThrottledLog(self.get_logger().error, 0.5)
 
-        self.loop = RateLoop(self.rate_hz, self._cycle, self._on_loop_error, name=NODE_NAME, realtime_priority=params["realtime_priority"])
         self.get_logger().info(
             f"robot {self.model.name}: {self.time_scaling} lines at <= {self.limits.max_linear_velocity:g} m/s, "
             f"{self.limits.max_angular_velocity:g} rad/s, streamed at {self.rate_hz:g} Hz"
         )
-        if self.loop.realtime_priority:
-            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
-        self.loop.start()
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -259,16 +255,6 @@ class TrajectoryGeneratorNode(Node):
         level = "warn" if self.state == "rejected" else "ok"
         status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
-
-    def _on_loop_error(self, error: BaseException) -> None:
-        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
-            self.loop.stop(timeout=0.0)
-            return
-        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
-
-    def stop(self) -> None:
-        """Stop the loop thread (before the node is destroyed)."""
-        self.loop.stop()
 
 
 def main(argv=None) -> int:
