@@ -24,7 +24,7 @@ import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.model import RobotModel
-from manip_kin.rotations import matrix_to_rpy, rpy_rate_matrix
+from manip_kin.rotations import invert_transform, matrix_to_rpy, rpy_rate_matrix, skew
 
 JACOBIAN_KINDS = ("geometric", "space", "body", "analytical")
 _BATCH_BLOCK = 4096  # configurations per block in batch_frame_pose: 16 x 32 KiB temporaries
@@ -158,11 +158,6 @@ class Jacobian:
         return np.vstack([self.angular, self.linear])
 
 
-def _skew_rows(vector: np.ndarray) -> np.ndarray:
-    x, y, z = vector
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def jacobian_from_data(model: RobotModel, data: KinematicsData, frame_index: int, kind: str) -> Jacobian:
     """Any Jacobian kind of a frame from a filled workspace."""
     if kind not in JACOBIAN_KINDS:
@@ -172,7 +167,7 @@ def jacobian_from_data(model: RobotModel, data: KinematicsData, frame_index: int
     angular, linear = geometric[:3], geometric[3:]
     if kind == "space":
         # v_s = ṗ - ω × p = ṗ + p × ω
-        linear = linear + _skew_rows(pose[:3, 3]) @ angular
+        linear = linear + skew(pose[:3, 3]) @ angular
     elif kind == "body":
         rotation_t = pose[:3, :3].T
         angular, linear = rotation_t @ angular, rotation_t @ linear
@@ -198,16 +193,20 @@ def _frame_tail(model: RobotModel, frame_index: int) -> tuple[np.ndarray, int]:
     return tail, n
 
 
-def compiled_kinematics(model: RobotModel, frame_index: int, with_jacobian: bool):
-    """The unrolled ``chain(q) -> tuple`` for one frame, built once per model."""
-    key = (frame_index, with_jacobian)
+def compiled_kinematics(model: RobotModel, frame_index: int, with_jacobian: bool, vectorized: bool = False):
+    """The unrolled ``chain(q) -> tuple`` for one frame, built once per model.
+
+    With ``vectorized`` it runs on one numpy array of configurations per joint (see
+    :func:`manip_kin.chain_codegen.compile_chain`).
+    """
+    key = (frame_index, with_jacobian, vectorized)
     function = model.compiled.get(key)
     if function is None:
         from manip_kin.chain_codegen import compile_chain
 
         tail, count = _frame_tail(model, frame_index)
         revolute = [bool(flag) for flag in model.chain.revolute_mask]
-        function = compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian)
+        function = compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian, vectorized=vectorized)
         model.compiled[key] = function
     return function
 
@@ -253,10 +252,7 @@ def transform_between(model: RobotModel, q, frame_from: str | int, frame_to: str
     frames = frame_poses(model, q)
     a = frames[model.frame_index(frame_from)]
     b = frames[model.frame_index(frame_to)]
-    a_inverse = np.eye(4)
-    a_inverse[:3, :3] = a[:3, :3].T
-    a_inverse[:3, 3] = -a[:3, :3].T @ a[:3, 3]
-    return a_inverse @ b
+    return invert_transform(a) @ b
 
 
 def jacobian(model: RobotModel, q, frame: str | int | None = None, kind: str = "geometric") -> Jacobian:
@@ -288,15 +284,7 @@ def batch_frame_pose(model: RobotModel, configurations, frame: str | int | None 
     if q.ndim != 2 or q.shape[1] != model.dof:
         raise InvalidArgumentError(f"configurations have shape {q.shape}; valid: (N, {model.dof})")
     index = model.frame_index(model.default_frame if frame is None else frame)
-    key = ("batch", index)
-    chain_function = model.compiled.get(key)
-    if chain_function is None:
-        from manip_kin.chain_codegen import compile_chain
-
-        tail, count = _frame_tail(model, index)
-        revolute = [bool(flag) for flag in model.chain.revolute_mask]
-        chain_function = compile_chain(model.chain.fixed, revolute, tail, count, False, vectorized=True)
-        model.compiled[key] = chain_function
+    chain_function = compiled_kinematics(model, index, False, vectorized=True)
     count = q.shape[0]
     joint_rows = np.ascontiguousarray(q.T)  # one contiguous row of N values per joint
     out = np.empty((count, 16))
