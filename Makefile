@@ -4,10 +4,9 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-# DDS stays on loopback; a domain id per run so parallel runs never cross.
+# DDS stays on loopback. Each run picks a free ROS_DOMAIN_ID itself (demo and bench through
+# manip_kin.pipeline.ensure_ros_isolation, tests in test/conftest.py) unless one is set.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
-ROS_DOMAIN_ID ?= $(shell $(PYTHON) -c "import random; print(random.randint(1, 100))")
-export ROS_DOMAIN_ID
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)
 export PYTHONUNBUFFERED := 1

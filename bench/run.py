@@ -16,7 +16,6 @@ import argparse
 import json
 import os
 import platform
-import random
 import sys
 import time
 from pathlib import Path
@@ -172,9 +171,10 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=20_000, help="calls per micro-benchmark")
     parser.add_argument("--ik-targets", type=int, default=2000, help="random IK targets per arm")
     args = parser.parse_args()
-    # Any process that starts rclpy stays on loopback with its own domain.
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    # Any process that starts rclpy stays on loopback with its own free domain.
+    from manip_kin.pipeline import ensure_ros_isolation
+
+    ensure_ros_isolation()
 
     chosen = [s.strip() for s in args.only.split(",") if s.strip()]
     unknown = set(chosen) - set(SECTIONS)

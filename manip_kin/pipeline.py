@@ -63,6 +63,21 @@ def _domain_is_free(domain_id: int) -> bool:
     return True
 
 
+def pick_free_domain(exclude: Iterable[str] = ()) -> int:
+    """A random ``ROS_DOMAIN_ID`` in 1..100 that no local participant uses.
+
+    Raises:
+        PipelineError: every domain is taken (sharing one would mix two runs' topics).
+    """
+    excluded = {str(d) for d in exclude}
+    candidates = [d for d in range(1, 101) if str(d) not in excluded]
+    random.SystemRandom().shuffle(candidates)
+    for domain_id in candidates:
+        if _domain_is_free(domain_id):
+            return domain_id
+    raise PipelineError("no free ROS_DOMAIN_ID in 1..100 on this machine")
+
+
 def ensure_ros_isolation(environ: dict | None = None) -> dict:
     """Set ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a free ``ROS_DOMAIN_ID`` where unset.
 
@@ -76,9 +91,7 @@ def ensure_ros_isolation(environ: dict | None = None) -> dict:
     environ = os.environ if environ is None else environ
     environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if not environ.get("ROS_DOMAIN_ID"):
-        candidates = list(range(1, 101))
-        random.SystemRandom().shuffle(candidates)
-        environ["ROS_DOMAIN_ID"] = str(next((d for d in candidates if _domain_is_free(d)), candidates[0]))
+        environ["ROS_DOMAIN_ID"] = str(pick_free_domain())
     return environ
 
 
@@ -90,10 +103,7 @@ def fresh_domain_env(environ: Mapping[str, str] | None = None) -> dict:
     """
     env = dict(os.environ if environ is None else environ)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    taken = env.get("ROS_DOMAIN_ID", "")
-    candidates = [d for d in range(1, 101) if str(d) != taken]
-    random.SystemRandom().shuffle(candidates)
-    env["ROS_DOMAIN_ID"] = str(next((d for d in candidates if _domain_is_free(d)), candidates[0]))
+    env["ROS_DOMAIN_ID"] = str(pick_free_domain(exclude=[env.get("ROS_DOMAIN_ID", "")]))
     return env
 
 
