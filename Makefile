@@ -11,7 +11,7 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: venv demo test bench clean
+.PHONY: venv demo test lint format bench clean
 
 venv: $(STAMP)
 
@@ -25,8 +25,17 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 demo: $(STAMP)
 	$(VENV)/bin/manip_kin demo
 
-test: $(STAMP)
+test: lint
 	$(VPY) -m pytest -q test
+
+# ruff (configured in ruff.toml): lint and format check; `make format` rewrites.
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: $(STAMP)
+	$(VENV)/bin/ruff format .
+	$(VENV)/bin/ruff check --fix .
 
 bench: $(STAMP)
 	$(VPY) bench/run.py --out bench/results/bench.json

@@ -52,7 +52,10 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0) -> list[dict]
     goal = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
     label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
     rows = []
-    with Pipeline(pipeline_processes("genova7", rate_hz=rate_hz, realtime_priority=priority), log_dir=tempfile.mkdtemp(prefix="bench_nodes_")) as pipeline:
+    with Pipeline(
+        pipeline_processes("genova7", rate_hz=rate_hz, realtime_priority=priority),
+        log_dir=tempfile.mkdtemp(prefix="bench_nodes_"),
+    ) as pipeline:
         client = pipeline.client()
         client.spin_for(1.0)
         client.send_goal(goal)
@@ -72,7 +75,9 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0) -> list[dict]
                     max_period_error_ms=status.number("loop_period_error_max_ms"),
                     compute_mean_ms=status.number("loop_compute_mean_ms"),
                 )
-            row["target"] = f"{TARGETS['rate']}; {TARGETS['cpu']}" if name != "trajectory_generator" else "(idle while no line)"
+            row["target"] = (
+                f"{TARGETS['rate']}; {TARGETS['cpu']}" if name != "trajectory_generator" else "(idle while no line)"
+            )
             row["reference"] = REFERENCE
             rows.append(row)
         if rate_hz >= 1000:
@@ -163,7 +168,9 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         client = pipeline.client()
         converged, _ = client.wait_converged(client.send_goal(make_transform(down, start)), 30)
         samples: list[np.ndarray] = []
-        client.node.create_subscription(PoseStamped, "/tool_pose", lambda m: samples.append(pose_stamped_to_matrix(m)[:3, 3]), 1000)
+        client.node.create_subscription(
+            PoseStamped, "/tool_pose", lambda m: samples.append(pose_stamped_to_matrix(m)[:3, 3]), 1000
+        )
         client.spin_for(0.3)
         done = client.wait_line_done(client.send_line(make_transform(down, end)), 15)
         final, status = client.wait_converged(done.values.get("final_goal_stamp", ""), 15)

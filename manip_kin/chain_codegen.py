@@ -24,6 +24,7 @@ import numpy as np
 # rotations (and URDF rpy of ±π/2) leave 1e-17 residues that would only cost time.
 _SNAP = 1e-14
 
+
 def _snap(value: float) -> float:
     for exact in (0.0, 1.0, -1.0):
         if abs(value - exact) < _SNAP:
@@ -163,9 +164,7 @@ def compile_chain(
     joint and every returned entry is an array of N values (or a constant).
     """
     source = generate_source(fixed, revolute, tail, count, with_jacobian)
-    namespace: dict[str, object] = (
-        {"cos": np.cos, "sin": np.sin} if vectorized else {"cos": math.cos, "sin": math.sin}
-    )
+    namespace: dict[str, object] = {"cos": np.cos, "sin": np.sin} if vectorized else {"cos": math.cos, "sin": math.sin}
     exec(compile(source, "<manip_kin chain>", "exec"), namespace)  # noqa: S102 - our own generated code
     chain = namespace["chain"]
     chain.source = source  # type: ignore[attr-defined]  # kept for inspection and debugging

@@ -251,7 +251,12 @@ def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: t
 
 
 def ik_iteration_source(
-    chain: Callable, dof: int, rows: Sequence[int], lower: Sequence[float], upper: Sequence[float], wraps: Sequence[bool]
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    lower: Sequence[float],
+    upper: Sequence[float],
+    wraps: Sequence[bool],
 ) -> str:
     """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`).
 
@@ -334,7 +339,12 @@ def ik_iteration_source(
 
 
 def compile_ik_iteration(
-    chain: Callable, dof: int, rows: Sequence[int], lower: Sequence[float], upper: Sequence[float], wraps: Sequence[bool]
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    lower: Sequence[float],
+    upper: Sequence[float],
+    wraps: Sequence[bool],
 ) -> Callable | None:
     """Compile :func:`ik_iteration_source`; None when the chain cannot be fused."""
     if not isinstance(getattr(chain, "source", None), str):

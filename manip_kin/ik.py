@@ -125,18 +125,29 @@ class _Problem:
         # Revolute joints spanning a full turn are wrapped (q and q ± 2π are the same pose);
         # the others are clipped.
         span = [self.upper[j] - self.lower[j] for j in range(n)]
-        self.wraps = [joint.is_revolute and math.isfinite(span[j]) and span[j] >= _TWO_PI - 1e-12 for j, joint in enumerate(model.joints)]
+        self.wraps = [
+            joint.is_revolute and math.isfinite(span[j]) and span[j] >= _TWO_PI - 1e-12
+            for j, joint in enumerate(model.joints)
+        ]
         self.clipped = [j for j in range(n) if not self.wraps[j]]
         self.iterate = compile_ik_iteration(self.chain, n, task.rows, self.lower, self.upper, self.wraps)
         # Random restarts: uniform within the limits (finite stand-ins for continuous joints).
-        self.sample_low = [lo if math.isfinite(lo) else (-1.0 if j.type.value == "prismatic" else -math.pi) for lo, j in zip(self.lower, model.joints)]
-        sample_high = [hi if math.isfinite(hi) else (1.0 if j.type.value == "prismatic" else math.pi) for hi, j in zip(self.upper, model.joints)]
+        self.sample_low = [
+            lo if math.isfinite(lo) else (-1.0 if j.type.value == "prismatic" else -math.pi)
+            for lo, j in zip(self.lower, model.joints)
+        ]
+        sample_high = [
+            hi if math.isfinite(hi) else (1.0 if j.type.value == "prismatic" else math.pi)
+            for hi, j in zip(self.upper, model.joints)
+        ]
         self.sample_span = [high - low for low, high in zip(self.sample_low, sample_high)]
         self.reach = _reach_bound(model, frame_index)
         self.first_joint = model.chain.fixed[0][:3, 3].copy()
 
     def random_start(self, generator: np.random.Generator) -> list:
-        return [low + span * u for low, span, u in zip(self.sample_low, self.sample_span, generator.random(self.n).tolist())]
+        return [
+            low + span * u for low, span, u in zip(self.sample_low, self.sample_span, generator.random(self.n).tolist())
+        ]
 
     def project(self, q: list) -> list:
         """``q`` moved into the limits: wrapped by whole turns or clipped."""
@@ -285,7 +296,10 @@ def solve_ik(
         raise InvalidArgumentError("give either task or mask, not both")
     task_spec = parse_task(mask if mask is not None else task, model)
     frame_index = model.frame_index(model.default_frame if frame is None else frame)
-    tolerances = (_check_positive(tolerance_orientation, "tolerance_orientation"), _check_positive(tolerance_position, "tolerance_position"))
+    tolerances = (
+        _check_positive(tolerance_orientation, "tolerance_orientation"),
+        _check_positive(tolerance_position, "tolerance_position"),
+    )
     if not (isinstance(max_iterations, (int, np.integer)) and max_iterations >= 1):
         raise InvalidArgumentError(f"max_iterations = {max_iterations!r}; valid: an integer >= 1")
     if not (isinstance(step, (int, float)) and 0.0 < step <= 1.0):
@@ -366,9 +380,13 @@ def _run_attempt(
     while True:
         status = _GENERAL
         if fused is not None:
-            status, q_next, orientation, position = fused(q, goal, weight, shift, step, tolerance_orientation, tolerance_position)
+            status, q_next, orientation, position = fused(
+                q, goal, weight, shift, step, tolerance_orientation, tolerance_position
+            )
         if status == _GENERAL:
-            status, q_next, orientation, position = _general_iteration(problem, goal, q, method, step, damping, tolerances)
+            status, q_next, orientation, position = _general_iteration(
+                problem, goal, q, method, step, damping, tolerances
+            )
         combined = math.hypot(orientation, position)
         if best is None or combined < best.error:
             best = _Attempt(q, orientation, position)
@@ -448,9 +466,7 @@ def _failure_reason(
                 f"{problem.reach:.3g} m ({errors}, {tries})"
             )
     held = [
-        model.joints[j].name
-        for j in problem.clipped
-        if best.q[j] <= problem.lower[j] or best.q[j] >= problem.upper[j]
+        model.joints[j].name for j in problem.clipped if best.q[j] <= problem.lower[j] or best.q[j] >= problem.upper[j]
     ]
     if out_of_budget:
         return f"budget: the time budget of {time_budget:g} s ran out after {tries} ({errors})"

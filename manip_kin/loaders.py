@@ -59,8 +59,7 @@ from manip_kin.rotations import (
 
 DESCRIPTION_KEYS = ("joints", "dh", "poe", "urdf")
 TOP_LEVEL_KEYS = frozenset(
-    DESCRIPTION_KEYS
-    + ("name", "description", "units", "scale", "base_frame", "tool", "ee_offset", "initial_positions")
+    DESCRIPTION_KEYS + ("name", "description", "units", "scale", "base_frame", "tool", "ee_offset", "initial_positions")
 )
 _PI_EXPRESSION = re.compile(
     r"^\s*(?P<sign>[+-])?\s*(?P<coef>\d+(\.\d*)?|\.\d+)?\s*\*?\s*pi\s*(/\s*(?P<den>\d+(\.\d*)?))?\s*$"

@@ -168,9 +168,7 @@ class RobotModel:
             raise ModelFileError(self.source or self.name, "joints", f"joint names repeat: {names}")
         for j in self.joints:
             if not j.lower <= j.upper:
-                raise ModelFileError(
-                    self.source or self.name, f"{j.name}.limits", f"lower {j.lower} > upper {j.upper}"
-                )
+                raise ModelFileError(self.source or self.name, f"{j.name}.limits", f"lower {j.lower} > upper {j.upper}")
             if not j.velocity_limit > 0:
                 raise ModelFileError(
                     self.source or self.name,

@@ -211,11 +211,17 @@ def pipeline_processes(
     return [
         NodeProcess("robot_state", "robot_state", state, params_file, ready_status="robot_state"),
         NodeProcess(
-            "cartesian_controller", "cartesian_controller", dict(common, **(controller or {})), params_file,
+            "cartesian_controller",
+            "cartesian_controller",
+            dict(common, **(controller or {})),
+            params_file,
             ready_status="cartesian_controller",
         ),
         NodeProcess(
-            "trajectory_generator", "trajectory_generator", dict(common, **(generator or {})), params_file,
+            "trajectory_generator",
+            "trajectory_generator",
+            dict(common, **(generator or {})),
+            params_file,
             ready_status="trajectory_generator",
         ),
     ]
@@ -276,7 +282,9 @@ class Pipeline:
         log.write(f"$ {' '.join(command)}\n".encode())
         log.flush()
         self._logs[name] = log
-        self._popen[name] = subprocess.Popen(command, env=self.env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        self._popen[name] = subprocess.Popen(
+            command, env=self.env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+        )
         return self._popen[name]
 
     def wait_ready(self, names: Sequence[str], timeout: float = 30.0) -> None:
@@ -435,7 +443,13 @@ class PipelineClient:
         node_name: this node's name.
     """
 
-    def __init__(self, env: Mapping[str, str] | None = None, watch_state: bool = False, base_frame: str = "base_link", node_name: str = ""):
+    def __init__(
+        self,
+        env: Mapping[str, str] | None = None,
+        watch_state: bool = False,
+        base_frame: str = "base_link",
+        node_name: str = "",
+    ):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped
@@ -446,11 +460,15 @@ class PipelineClient:
         environ = ensure_ros_isolation() if env is None else env
         domain = int(environ.get("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0")))
         # rclpy reads the discovery range from this process's environment.
-        os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST"))
+        os.environ.setdefault(
+            "ROS_AUTOMATIC_DISCOVERY_RANGE", environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        )
         self.base_frame = base_frame
         self._context = rclpy.Context()
         # No signal handlers: Ctrl-C stays a KeyboardInterrupt for the program using the client.
-        rclpy.init(context=self._context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        rclpy.init(
+            context=self._context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO
+        )
         self.node = rclpy.create_node(node_name or f"manip_kin_client_{os.getpid()}", context=self._context)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self.node)
@@ -571,7 +589,9 @@ class PipelineClient:
 
         matched = self.spin_until(all_matched, timeout)
         if not matched:
-            raise PipelineError(f"no subscriber on {topic} after {timeout:g} s (is the node running, same ROS_DOMAIN_ID?)")
+            raise PipelineError(
+                f"no subscriber on {topic} after {timeout:g} s (is the node running, same ROS_DOMAIN_ID?)"
+            )
         # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
@@ -613,7 +633,9 @@ class PipelineClient:
             raise PipelineError(f"no /diagnostics from {name} within {timeout:g} s")
         return status
 
-    def wait_converged(self, goal_stamp: str, timeout: float = 30.0, controller: str = "cartesian_controller") -> tuple[bool, Status | None]:
+    def wait_converged(
+        self, goal_stamp: str, timeout: float = 30.0, controller: str = "cartesian_controller"
+    ) -> tuple[bool, Status | None]:
         """Wait until the controller reports ``converged`` on the goal stamped ``goal_stamp``.
 
         Returns:
@@ -632,7 +654,9 @@ class PipelineClient:
         converged = bool(self.spin_until(done, timeout))
         return converged, last[0]
 
-    def wait_line_done(self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator") -> Status:
+    def wait_line_done(
+        self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator"
+    ) -> Status:
         """Wait until the generator finished (``holding``) or rejected the target ``target_stamp``.
 
         Returns:

@@ -199,7 +199,9 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     for i, axis_name in enumerate("xyz"):
         axes[i].plot(run.tool.time, run.tool.position[:, i], label=f"tool {axis_name}")
         if len(run.goal.time):
-            axes[i].step(run.goal.time, run.goal.position[:, i], where="post", linestyle="--", label=f"reference {axis_name}")
+            axes[i].step(
+                run.goal.time, run.goal.position[:, i], where="post", linestyle="--", label=f"reference {axis_name}"
+            )
         axes[i].set_ylabel(f"{axis_name} [m]")
         axes[i].legend(loc="best", fontsize="small")
         axes[i].grid(True, alpha=0.3)
@@ -287,8 +289,14 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
                 break
             origins = frame_poses(model, q)[:, :3, 3]
             shade = 0.2 + 0.6 * k / max(1, len(instants) - 1)
-            axis.plot(*origins.T, marker="o", markersize=3, color=(shade, shade, shade), linewidth=1.5,
-                      label=f"arm at t = {run.joint_time[sample]:.1f} s")
+            axis.plot(
+                *origins.T,
+                marker="o",
+                markersize=3,
+                color=(shade, shade, shade),
+                linewidth=1.5,
+                label=f"arm at t = {run.joint_time[sample]:.1f} s",
+            )
             drawn.append(origins)
     if len(run.goal.time):
         axis.scatter(*run.goal.position.T, s=2, color="tab:green", alpha=0.2, label="goal poses")

@@ -92,9 +92,7 @@ def is_rotation(matrix, tolerance: float = 1e-6) -> bool:
     m = np.asarray(matrix, dtype=float)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return False
-    return bool(
-        np.allclose(m @ m.T, np.eye(3), atol=tolerance) and abs(np.linalg.det(m) - 1.0) < tolerance
-    )
+    return bool(np.allclose(m @ m.T, np.eye(3), atol=tolerance) and abs(np.linalg.det(m) - 1.0) < tolerance)
 
 
 def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> np.ndarray:

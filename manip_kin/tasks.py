@@ -46,7 +46,9 @@ class Task:
     def __post_init__(self):
         rows = tuple(sorted(set(int(r) for r in self.rows)))
         if not rows or rows[0] < 0 or rows[-1] > 5:
-            raise InvalidArgumentError(f"task rows {self.rows!r}; valid: a non-empty subset of 0..5 ({', '.join(COMPONENTS)})")
+            raise InvalidArgumentError(
+                f"task rows {self.rows!r}; valid: a non-empty subset of 0..5 ({', '.join(COMPONENTS)})"
+            )
         object.__setattr__(self, "rows", rows)
 
     @property

@@ -53,7 +53,12 @@ class MotionLimits:
     max_angular_acceleration: float = 1.0
 
     def __post_init__(self):
-        for name in ("max_linear_velocity", "max_linear_acceleration", "max_angular_velocity", "max_angular_acceleration"):
+        for name in (
+            "max_linear_velocity",
+            "max_linear_acceleration",
+            "max_angular_velocity",
+            "max_angular_acceleration",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InvalidArgumentError(f"{name} = {value}; valid: a positive finite number")

@@ -173,7 +173,9 @@ def damped_solve_lines(
     return lines, qdot
 
 
-def _damped_solve_source(dof: int, rows: Sequence[int], constants: dict[int, float], offset: int, inverse_trace: bool) -> str:
+def _damped_solve_source(
+    dof: int, rows: Sequence[int], constants: dict[int, float], offset: int, inverse_trace: bool
+) -> str:
     n, m = dof, len(rows)
     entries = jacobian_entries(dof, rows, None, constants, offset)
     unpacked = {offset + r * n + j: f"j{i}_{j}" for i, r in enumerate(rows) for j in range(n)}

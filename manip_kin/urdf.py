@@ -221,7 +221,7 @@ class _UrdfReader:
         reference = element.find(tag)
         name = "" if reference is None else reference.get("link", "").strip()
         if not name:
-            raise self.fail(f"{where}/{tag}@link", f"missing; a joint needs <{tag} link=\"...\"/>")
+            raise self.fail(f"{where}/{tag}@link", f'missing; a joint needs <{tag} link="..."/>')
         if name not in self.links:
             raise self.fail(f"{where}/{tag}@link", f"{name!r} is not a <link> of this robot")
         return name
@@ -322,9 +322,7 @@ def _model_joint(reader: _UrdfReader, joint: _UrdfJoint, origin: np.ndarray) -> 
     """A model joint from a movable URDF joint, with ``origin`` already including folded fixed joints."""
     where = f"joint[{joint.name}]"
     if joint.has_mimic:
-        raise reader.fail(
-            f"{where}/mimic", "mimic joints are not supported in the chain; choose a tip link before it"
-        )
+        raise reader.fail(f"{where}/mimic", "mimic joints are not supported in the chain; choose a tip link before it")
     limit = joint.limit
     if joint.type == "continuous":
         lower, upper = -math.inf, math.inf
@@ -623,4 +621,3 @@ def model_to_urdf(model: RobotModel) -> str:
         _add_visual(tool_link, np.eye(4), "sphere", "manip_kin_joint", radius=_FRAME_RADIUS)
     ET.indent(robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
-

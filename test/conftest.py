@@ -53,8 +53,20 @@ def colcon_install(tmp_path_factory) -> ColconInstall:
         pytest.skip("colcon is not installed")
     workspace = tmp_path_factory.mktemp("colcon_ws")
     result = subprocess.run(
-        [str(colcon), "build", "--base-paths", str(REPO_ROOT), "--build-base", "build", "--install-base", "install",
-         "--packages-select", "manip_kin", "--event-handlers", "console_direct-"],
+        [
+            str(colcon),
+            "build",
+            "--base-paths",
+            str(REPO_ROOT),
+            "--build-base",
+            "build",
+            "--install-base",
+            "install",
+            "--packages-select",
+            "manip_kin",
+            "--event-handlers",
+            "console_direct-",
+        ],
         cwd=workspace,
         env=dict(os.environ, COLCON_HOME=str(workspace / ".colcon")),
         capture_output=True,

@@ -15,9 +15,9 @@ def rodrigues(axis, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
-def homogeneous(rotation=np.eye(3), translation=(0.0, 0.0, 0.0)) -> np.ndarray:
+def homogeneous(rotation=None, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
     out = np.eye(4)
-    out[:3, :3] = rotation
+    out[:3, :3] = np.eye(3) if rotation is None else rotation
     out[:3, 3] = translation
     return out
 
@@ -56,7 +56,9 @@ def fixed_then_z_fk(fixed_transforms, joint_types, q) -> list[np.ndarray]:
     pose = np.eye(4)
     frames = []
     for fixed, kind, value in zip(fixed_transforms, joint_types, q):
-        motion = homogeneous(rodrigues([0, 0, 1], value)) if kind == "revolute" else homogeneous(translation=(0, 0, value))
+        motion = (
+            homogeneous(rodrigues([0, 0, 1], value)) if kind == "revolute" else homogeneous(translation=(0, 0, value))
+        )
         pose = pose @ fixed @ motion
         frames.append(pose)
     return frames

@@ -36,7 +36,11 @@ class Harness:
 
     def collect(self, msg_type, topic: str, latched: bool = False) -> list:
         received = []
-        qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE) if latched else 100
+        qos = (
+            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+            if latched
+            else 100
+        )
         self.node.create_subscription(msg_type, topic, received.append, qos)
         return received
 

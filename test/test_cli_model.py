@@ -36,7 +36,9 @@ def test_fk_json_for_every_robot(capsys, robot):
     np.testing.assert_allclose(result["xyz"], matrix[:3, 3], atol=0)
     x, y, z, w = result["quat_xyzw"]
     # the quaternion encodes the same rotation: R e_z from the quaternion formula
-    np.testing.assert_allclose([2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)], matrix[:3, 2], atol=1e-12)
+    np.testing.assert_allclose(
+        [2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)], matrix[:3, 2], atol=1e-12
+    )
 
 
 def test_fk_joint_frame_index_and_default_configuration(capsys):
@@ -63,7 +65,14 @@ def test_robots_lists_every_bundled_robot(capsys):
     assert {"genova7", "mocom7", "irb120", "rpp", "scara"} <= set(result["robots"])
     genova = result["robots"]["genova7"]
     assert genova["dof"] == 7 and genova["tool"] is True
-    assert genova["joints"][5] == {"name": "joint6", "type": "prismatic", "lower": 0.0, "upper": 0.3, "velocity": 0.5, "unit": "m"}
+    assert genova["joints"][5] == {
+        "name": "joint6",
+        "type": "prismatic",
+        "lower": 0.0,
+        "upper": 0.3,
+        "velocity": 0.5,
+        "unit": "m",
+    }
 
 
 @pytest.mark.parametrize(
@@ -72,7 +81,10 @@ def test_robots_lists_every_bundled_robot(capsys):
         (["fk", "--robot", "nope"], "unknown robot 'nope'"),
         (["fk", "--robot", "irb120", "--q", "1", "2"], "--q has 2 values, the robot has 6 joints"),
         (["fk", "--robot", "irb120", "--q", "0", "0", "nan", "0", "0", "0"], "NaN or infinity"),
-        (["fk", "--robot", "irb120", "--frame", "tool"], "unknown frame 'tool'; valid frames: base, 1, 2, 3, 4, 5, 6, ee"),
+        (
+            ["fk", "--robot", "irb120", "--frame", "tool"],
+            "unknown frame 'tool'; valid frames: base, 1, 2, 3, 4, 5, 6, ee",
+        ),
         (["fk", "--robot", "irb120", "--q", "a"], "invalid float value: 'a'"),
         (["jacobian", "--robot", "irb120", "--kind", "hybrid"], "invalid choice: 'hybrid'"),
         (["fk"], "the following arguments are required: --robot"),

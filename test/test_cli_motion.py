@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from kin_reference import euler_rpy
+
 from manip_kin.cli import main
 from manip_kin.control import pose_error
 from manip_kin.kinematics import KinematicsData, forward_kinematics
@@ -50,7 +50,10 @@ def tool_pose(model, q) -> np.ndarray:
 
 def test_ik_json_reaches_the_pose_with_rpy(capsys):
     model = load_robot("genova7")
-    code, answer, _ = run_json(capsys, ["ik", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--seed", "3", "--json"])
+    code, answer, _ = run_json(
+        capsys,
+        ["ik", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--seed", "3", "--json"],
+    )
     assert code == 0
     assert IK_KEYS <= set(answer)
     assert answer["success"] is True and answer["reason"] == "converged"
@@ -78,7 +81,26 @@ def test_ik_with_a_quaternion_and_an_initial_guess(capsys):
 def test_ik_on_an_under_actuated_arm_says_which_task(capsys):
     model = load_robot("scara")
     code, answer, err = run_json(
-        capsys, ["ik", "--robot", "scara", "--xyz", "0.7", "0.7", "0.2", "--rpy", "0", "0", repr(math.pi / 4), "--q0", "0", "0", "0", "0", "--json"]
+        capsys,
+        [
+            "ik",
+            "--robot",
+            "scara",
+            "--xyz",
+            "0.7",
+            "0.7",
+            "0.2",
+            "--rpy",
+            "0",
+            "0",
+            repr(math.pi / 4),
+            "--q0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "--json",
+        ],
     )
     assert code == 0 and answer["success"]
     assert answer["task"] == "position_yaw"
@@ -89,7 +111,9 @@ def test_ik_on_an_under_actuated_arm_says_which_task(capsys):
 
 
 def test_ik_task_flag_chooses_the_components(capsys):
-    code, answer, err = run_json(capsys, ["ik", "--robot", "rpp", "--xyz", "0.5", "-0.1", "0.6", "--task", "position", "--json"])
+    code, answer, err = run_json(
+        capsys, ["ik", "--robot", "rpp", "--xyz", "0.5", "-0.1", "0.6", "--task", "position", "--json"]
+    )
     assert code == 0 and answer["task"] == "position" and answer["success"]
     assert err == ""  # an explicit task needs no note
     position = tool_pose(load_robot("rpp"), answer["q"])[:3, 3]
@@ -97,7 +121,9 @@ def test_ik_task_flag_chooses_the_components(capsys):
 
 
 def test_ik_failure_exits_1_with_a_reason(capsys):
-    code, answer, _ = run_json(capsys, ["ik", "--robot", "irb120", "--xyz", "2", "0", "0.5", "--restarts", "2", "--seed", "1", "--json"])
+    code, answer, _ = run_json(
+        capsys, ["ik", "--robot", "irb120", "--xyz", "2", "0", "0.5", "--restarts", "2", "--seed", "1", "--json"]
+    )
     assert code == 1
     assert answer["success"] is False and answer["reason"].startswith("unreachable")
 
@@ -114,7 +140,21 @@ def test_ik_readable_summary(capsys):
 
 def test_simulate_genova7_pose_goal_json(capsys):
     model = load_robot("genova7")
-    argv = ["simulate", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--gain-linear", "0.8"]
+    argv = [
+        "simulate",
+        "--robot",
+        "genova7",
+        "--xyz",
+        "0.2",
+        "-0.7",
+        "0.3",
+        "--rpy",
+        "0",
+        "1.57",
+        "0",
+        "--gain-linear",
+        "0.8",
+    ]
     argv += ["--gain-angular", "0.8", "--dt", "0.001", "--duration", "18", "--tolerance", "1e-6", "--json"]
     code, answer, _ = run_json(capsys, argv)
     assert code == 0
@@ -129,7 +169,21 @@ def test_simulate_genova7_pose_goal_json(capsys):
 
 
 def test_simulate_without_limit_handling_does_not_converge(capsys):
-    argv = ["simulate", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--duration", "18"]
+    argv = [
+        "simulate",
+        "--robot",
+        "genova7",
+        "--xyz",
+        "0.2",
+        "-0.7",
+        "0.3",
+        "--rpy",
+        "0",
+        "1.57",
+        "0",
+        "--duration",
+        "18",
+    ]
     code, answer, _ = run_json(capsys, argv + ["--ignore-position-limits", "--json"])
     assert code == 1
     assert answer["converged"] is False and answer["time_to_converge"] is None
@@ -159,7 +213,9 @@ def test_simulate_out_of_reach_readable(capsys):
 
 
 def test_simulate_rpp_defaults_to_position(capsys):
-    code, answer, err = run_json(capsys, ["simulate", "--robot", "rpp", "--xyz", "0.5", "-0.1", "0.6", "--duration", "30", "--json"])
+    code, answer, err = run_json(
+        capsys, ["simulate", "--robot", "rpp", "--xyz", "0.5", "-0.1", "0.6", "--duration", "30", "--json"]
+    )
     assert code == 0 and answer["task"] == "position"
     assert "position" in err
     np.testing.assert_allclose(tool_pose(load_robot("rpp"), answer["q_final"])[:3, 3], [0.5, -0.1, 0.6], atol=1e-6)
@@ -178,7 +234,10 @@ def test_simulate_rpp_defaults_to_position(capsys):
         (["ik", "--robot", "genova7", "--xyz", "0.5", "0", "0.6", "--quat", "0", "0", "0", "2"], "quat"),
         (["simulate", "--robot", "genova7", "--xyz", "0.5", "0", "0.6", "--dt", "0"], "--dt"),
         (["simulate", "--robot", "genova7", "--xyz", "0.5", "0", "0.6", "--gain-linear", "-1"], "gain_linear"),
-        (["simulate", "--robot", "genova7", "--q0", "0", "0", "0", "0", "0", "0.5", "0", "--xyz", "0.5", "0", "0.6"], "outside"),
+        (
+            ["simulate", "--robot", "genova7", "--q0", "0", "0", "0", "0", "0", "0.5", "0", "--xyz", "0.5", "0", "0.6"],
+            "outside",
+        ),
         (["simulate", "--robot", "genova7", "--xyz", "0.5", "0"], "--xyz"),
     ],
 )
@@ -199,7 +258,23 @@ def test_bad_input_is_one_line_and_exit_2(capsys, argv, fragment):
 
 def test_executable_ik_and_simulate_json():
     ik = subprocess.run(
-        [str(EXECUTABLE), "ik", "--robot", "genova7", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--seed", "1", "--json"],
+        [
+            str(EXECUTABLE),
+            "ik",
+            "--robot",
+            "genova7",
+            "--xyz",
+            "0.2",
+            "-0.7",
+            "0.3",
+            "--rpy",
+            "0",
+            "1.57",
+            "0",
+            "--seed",
+            "1",
+            "--json",
+        ],
         capture_output=True,
         text=True,
         timeout=60,
@@ -217,5 +292,10 @@ def test_executable_ik_and_simulate_json():
     answer = json.loads(sim.stdout)
     assert answer["converged"] and answer["task"] == "position_yaw"
     assert "position_yaw" in sim.stderr
-    bad = subprocess.run([str(EXECUTABLE), "simulate", "--robot", "genova7", "--xyz", "0", "0", "0", "--dt", "-1"], capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [str(EXECUTABLE), "simulate", "--robot", "genova7", "--xyz", "0", "0", "0", "--dt", "-1"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert bad.returncode == 2 and bad.stdout == "" and len(bad.stderr.strip().splitlines()) == 1

@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 REPO = Path(__file__).resolve().parents[1]
 EXECUTABLES = ["manip_kin", "robot_state", "cartesian_controller", "trajectory_generator", "recorder"]
 
@@ -35,5 +34,11 @@ def test_installed_cli_finds_robots_through_the_ament_index(colcon_install):
     assert result.returncode == 0, result.stderr
     config, module = result.stdout.split()
     assert str(colcon_install.prefix) in config and str(colcon_install.prefix) in module
-    fk = subprocess.run([str(lib / "manip_kin"), "fk", "--robot", "genova7", "--json"], env=env, capture_output=True, text=True, timeout=60)
+    fk = subprocess.run(
+        [str(lib / "manip_kin"), "fk", "--robot", "genova7", "--json"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert fk.returncode == 0 and '"frame": "tool"' in fk.stdout

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 import pytest
-
 from kin_reference import rodrigues
+
 from manip_kin.control import CartesianController, ControllerConfig, pose_error
 from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError, UnknownFrameError
 from manip_kin.kinematics import frame_pose
@@ -34,7 +34,11 @@ def numeric_jacobian(model, q, frame=None, step=1e-6) -> np.ndarray:
         r_dot = (plus[:3, :3] - minus[:3, :3]) / (2 * step)
         omega_skew = r_dot @ frame_pose(model, q, frame)[:3, :3].T
         omega = 0.5 * np.array(
-            [omega_skew[2, 1] - omega_skew[1, 2], omega_skew[0, 2] - omega_skew[2, 0], omega_skew[1, 0] - omega_skew[0, 1]]
+            [
+                omega_skew[2, 1] - omega_skew[1, 2],
+                omega_skew[0, 2] - omega_skew[2, 0],
+                omega_skew[1, 0] - omega_skew[0, 1],
+            ]
         )
         columns.append(np.concatenate([omega, (plus[:3, 3] - minus[:3, 3]) / (2 * step)]))
     return np.array(columns).T
@@ -112,14 +116,18 @@ def test_controller_error_matches_pose_error():
 
 def _goal_near(model, q, rng, frame=None):
     current = frame_pose(model, q, frame)
-    return make_transform(rodrigues(rng.normal(size=3), 0.3) @ current[:3, :3], current[:3, 3] + rng.normal(scale=0.05, size=3))
+    return make_transform(
+        rodrigues(rng.normal(size=3), 0.3) @ current[:3, :3], current[:3, 3] + rng.normal(scale=0.05, size=3)
+    )
 
 
 @pytest.mark.parametrize("robot", ["genova7", "mocom7", "irb120"])
 def test_rates_are_the_pseudo_inverse_of_the_reference_twist(robot):
     model = load_robot(robot)
     rng = np.random.default_rng(3)
-    config = ControllerConfig(gain_angular=0.7, gain_linear=1.3, respect_velocity_limits=False, respect_position_limits=False)
+    config = ControllerConfig(
+        gain_angular=0.7, gain_linear=1.3, respect_velocity_limits=False, respect_position_limits=False
+    )
     controller = CartesianController(model, config)
     checked = 0
     while checked < 10:
@@ -183,7 +191,10 @@ def test_default_tasks_for_under_actuated_arms():
     assert CartesianController(load_robot("rpp")).task.name == "position"
     assert CartesianController(load_robot("genova7")).task.name == "full"
     assert CartesianController(load_robot("genova7"), ControllerConfig(task="position")).task.rows == (3, 4, 5)
-    assert CartesianController(load_robot("genova7"), ControllerConfig(task=(0, 0, 1, 1, 1, 1))).task.name == "position_yaw"
+    assert (
+        CartesianController(load_robot("genova7"), ControllerConfig(task=(0, 0, 1, 1, 1, 1))).task.name
+        == "position_yaw"
+    )
 
 
 def test_controlled_frame_can_be_chosen():
@@ -209,9 +220,9 @@ def test_velocity_limits_scale_the_whole_vector():
     goal = genova7_scenario_goal()
     config = ControllerConfig(gain_angular=20.0, gain_linear=20.0)
     limited = CartesianController(model, config).step(q, goal, dt=0.001)
-    free = CartesianController(model, ControllerConfig(gain_angular=20.0, gain_linear=20.0, respect_velocity_limits=False)).step(
-        q, goal, dt=0.001
-    )
+    free = CartesianController(
+        model, ControllerConfig(gain_angular=20.0, gain_linear=20.0, respect_velocity_limits=False)
+    ).step(q, goal, dt=0.001)
     ratios = np.abs(free.qdot) / model.velocity_limits
     assert ratios.max() > 1.0  # the unscaled command would exceed a limit
     assert limited.velocity_scale == pytest.approx(1.0 / ratios.max(), rel=1e-12)
@@ -226,7 +237,9 @@ def test_joint_at_a_limit_is_not_pushed_and_the_task_is_redistributed():
     model = load_robot("genova7")
     rng = np.random.default_rng(7)
     controller = CartesianController(model, ControllerConfig(respect_velocity_limits=False))
-    ignoring = CartesianController(model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False))
+    ignoring = CartesianController(
+        model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False)
+    )
     found = 0
     for _ in range(400):
         q = model.random_configuration(rng, margin=0.1)
@@ -255,7 +268,9 @@ def test_joint_approaching_a_limit_lands_exactly_on_it():
     model = load_robot("genova7")
     rng = np.random.default_rng(8)
     controller = CartesianController(model, ControllerConfig(respect_velocity_limits=False))
-    ignoring = CartesianController(model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False))
+    ignoring = CartesianController(
+        model, ControllerConfig(respect_velocity_limits=False, respect_position_limits=False)
+    )
     dt = 0.001
     for _ in range(200):
         q = model.random_configuration(rng, margin=0.1)

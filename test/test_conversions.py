@@ -153,14 +153,18 @@ def test_pose_and_twist_cdr_match_rclpy(frame):
     assert deserialize_message(data, PoseStamped) == expected
     angular, linear = np.array([0.1, -0.2, 0.3]), np.array([1.0, 2.0, -3.0])
     twist = conv.TwistStampedCdr(frame).encode(99, angular, linear)
-    assert deserialize_message(twist, _TwistStamped) == conv.make_twist_stamped(angular, linear, frame, conv.ns_to_stamp(99))
+    assert deserialize_message(twist, _TwistStamped) == conv.make_twist_stamped(
+        angular, linear, frame, conv.ns_to_stamp(99)
+    )
 
 
 @pytest.mark.parametrize("names", [["j1", "joint_2", "a"], [], ["abcde"] * 7])
 def test_joint_state_and_command_cdr_match_rclpy(names):
     position, velocity = np.arange(len(names)) * 1.5, -np.arange(len(names)) * 0.25
     data = conv.JointStateCdr(names).encode(5_000_000_001, position, velocity)
-    assert deserialize_message(data, JointState) == conv.make_joint_state(names, position, velocity, conv.ns_to_stamp(5_000_000_001))
+    assert deserialize_message(data, JointState) == conv.make_joint_state(
+        names, position, velocity, conv.ns_to_stamp(5_000_000_001)
+    )
     values = np.arange(len(names)) * 0.5
     command = conv.Float64ArrayCdr(len(names)).encode(values)
     assert deserialize_message(command, Float64MultiArray) == conv.array_to_multiarray(values)
@@ -224,10 +228,19 @@ def test_encode_values_paths_match_array_paths():
         decoded = deserialize_message(encoder.encode_values(7, values), PoseStamped)
         assert decoded.header.stamp.nanosec == 7 and decoded.header.frame_id == "base_link"
         np.testing.assert_allclose(conv.pose_stamped_to_matrix(decoded), matrix, atol=1e-12)
-    for special in (np.eye(3), rpy_to_matrix(math.pi, 0, 0), rpy_to_matrix(0, math.pi, 0), rpy_to_matrix(0, 0, math.pi)):
+    for special in (
+        np.eye(3),
+        rpy_to_matrix(math.pi, 0, 0),
+        rpy_to_matrix(0, math.pi, 0),
+        rpy_to_matrix(0, 0, math.pi),
+    ):
         values = make_transform(special, [0, 0, 0]).reshape(-1).tolist()
         np.testing.assert_allclose(conv.quaternion_of_pose_values(values), matrix_to_quat(special), atol=1e-12)
     twist = conv.TwistStampedCdr("base_link")
-    assert twist.encode_values(5, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]) == twist.encode(5, np.array([1.0, 2.0, 3.0]), np.array([4.0, 5.0, 6.0]))
+    assert twist.encode_values(5, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]) == twist.encode(
+        5, np.array([1.0, 2.0, 3.0]), np.array([4.0, 5.0, 6.0])
+    )
     joints = conv.JointStateCdr(["a", "b"])
-    assert joints.encode_values(5, [1.0, 2.0], [3.0, 4.0]) == joints.encode(5, np.array([1.0, 2.0]), np.array([3.0, 4.0]))
+    assert joints.encode_values(5, [1.0, 2.0], [3.0, 4.0]) == joints.encode(
+        5, np.array([1.0, 2.0]), np.array([3.0, 4.0])
+    )

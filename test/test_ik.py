@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from kin_reference import dh_fk, homogeneous, poe_fk, rodrigues
+
 from manip_kin.control import pose_error
 from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError
 from manip_kin.ik import IK_METHODS, solve_ik
@@ -37,7 +37,9 @@ def reference_pose(model, q) -> np.ndarray:
 def task_errors(model, q, target, rows) -> tuple[float, float]:
     orientation, position = pose_error(reference_pose(model, q), target)
     error = np.concatenate([orientation, position])
-    return float(np.linalg.norm(error[[r for r in rows if r < 3]])), float(np.linalg.norm(error[[r for r in rows if r >= 3]]))
+    return float(np.linalg.norm(error[[r for r in rows if r < 3]])), float(
+        np.linalg.norm(error[[r for r in rows if r >= 3]])
+    )
 
 
 def panda():
@@ -59,7 +61,8 @@ SCARA_HOME = homogeneous(translation=(1.0, 0.0, 0.0))
 
 
 @pytest.mark.parametrize(
-    "initial", [[0.0, 0.0, 0.0, 0.0], [math.pi / 2, -math.pi / 4, 0.1, math.pi / 6], [math.pi, math.pi / 2, 0.0, -math.pi / 2]]
+    "initial",
+    [[0.0, 0.0, 0.0, 0.0], [math.pi / 2, -math.pi / 4, 0.1, math.pi / 6], [math.pi, math.pi / 2, 0.0, -math.pi / 2]],
 )
 def test_scara_newton_raphson_from_the_three_guesses(initial):
     model = load_robot("scara")
@@ -79,7 +82,10 @@ def test_scara_stretched_start_is_singular():
     """The first guess really is singular: the planar Jacobian loses rank when q2 = 0."""
     jacobian = np.array(
         [
-            (poe_fk(SCARA_SCREWS, SCARA_HOME, np.eye(4)[j] * 1e-6)[:2, 3] - poe_fk(SCARA_SCREWS, SCARA_HOME, -np.eye(4)[j] * 1e-6)[:2, 3])
+            (
+                poe_fk(SCARA_SCREWS, SCARA_HOME, np.eye(4)[j] * 1e-6)[:2, 3]
+                - poe_fk(SCARA_SCREWS, SCARA_HOME, -np.eye(4)[j] * 1e-6)[:2, 3]
+            )
             / 2e-6
             for j in (0, 1)
         ]

@@ -76,9 +76,7 @@ def test_genova7_matches_the_convention_and_the_sanity_pose():
     frames, tool = _genova7_reference(q0)
     np.testing.assert_allclose(frame_pose(model, q0, "tool"), tool, atol=1e-12)
     # The sanity value printed in robots.md (4 decimals).
-    sanity = np.array(
-        [[0, 0.5, 0.866, 0], [-0.454, 0.7716, -0.4455, -1.1369], [-0.891, -0.3932, 0.227, 0.2327]]
-    )
+    sanity = np.array([[0, 0.5, 0.866, 0], [-0.454, 0.7716, -0.4455, -1.1369], [-0.891, -0.3932, 0.227, 0.2327]])
     np.testing.assert_allclose(frame_pose(model, q0)[:3], sanity, atol=6e-4)
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -120,7 +118,12 @@ def test_irb120_home_is_the_sum_of_offsets_and_axes_act_as_listed():
     np.testing.assert_allclose(rotated[:3, 3], pivot + rodrigues([0, 1, 0], angle) @ (home[:3, 3] - pivot), atol=1e-12)
 
 
-RPP_ROWS = [(0.4, 0.0, 0.0, math.pi / 2, None), (0.0, 0.0, 0.3, 0.0, "theta"), (0.2, math.pi / 2, 0.0, math.pi / 2, "d"), (0.1, math.pi / 2, 0.0, 0.0, "d")]
+RPP_ROWS = [
+    (0.4, 0.0, 0.0, math.pi / 2, None),
+    (0.0, 0.0, 0.3, 0.0, "theta"),
+    (0.2, math.pi / 2, 0.0, math.pi / 2, "d"),
+    (0.1, math.pi / 2, 0.0, 0.0, "d"),
+]
 
 
 def test_rpp_dh_table_matches_a_naive_dh_product():

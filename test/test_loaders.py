@@ -18,7 +18,9 @@ def test_bundled_robots_have_the_documented_joints_and_limits():
     assert genova.joint_names == [f"joint{i}" for i in range(1, 8)]
     assert genova.is_prismatic.tolist() == [False] * 5 + [True, False]
     assert (genova.lower[5], genova.upper[5], genova.velocity_limits[5]) == (0.0, 0.3, 0.5)
-    np.testing.assert_allclose(genova.initial_positions, [math.pi / 2, -math.pi / 4, 0, -math.pi / 4, 0, 0.15, math.pi / 4])
+    np.testing.assert_allclose(
+        genova.initial_positions, [math.pi / 2, -math.pi / 4, 0, -math.pi / 4, 0, 0.15, math.pi / 4]
+    )
     irb = load_robot("irb120")
     np.testing.assert_allclose(np.degrees(irb.upper), [165, 110, 70, 160, 120, 400])
     np.testing.assert_allclose(np.degrees(irb.velocity_limits), [250, 250, 250, 320, 320, 420])
@@ -28,9 +30,13 @@ def test_bundled_robots_have_the_documented_joints_and_limits():
 
 def test_robot_found_by_path_and_units_scale(tmp_path):
     metres = tmp_path / "m.yaml"
-    metres.write_text("name: arm\njoints:\n  - {name: a, origin: {xyz: [0, 0, 0.5]}}\n  - {name: b, type: prismatic, origin: {xyz: [0.2, 0, 0]}, limits: {lower: 0, upper: 0.3, velocity: 0.1}}\n")
+    metres.write_text(
+        "name: arm\njoints:\n  - {name: a, origin: {xyz: [0, 0, 0.5]}}\n  - {name: b, type: prismatic, origin: {xyz: [0.2, 0, 0]}, limits: {lower: 0, upper: 0.3, velocity: 0.1}}\n"
+    )
     millimetres = tmp_path / "mm.yaml"
-    millimetres.write_text("name: arm\nunits: mm\njoints:\n  - {name: a, origin: {xyz: [0, 0, 500]}}\n  - {name: b, type: prismatic, origin: {xyz: [200, 0, 0]}, limits: {lower: 0, upper: 300, velocity: 100}}\n")
+    millimetres.write_text(
+        "name: arm\nunits: mm\njoints:\n  - {name: a, origin: {xyz: [0, 0, 500]}}\n  - {name: b, type: prismatic, origin: {xyz: [200, 0, 0]}, limits: {lower: 0, upper: 300, velocity: 100}}\n"
+    )
     a, b = load_robot(str(metres)), load_robot(str(millimetres))
     assert resolve_robot_path(str(metres)) == metres.resolve()
     np.testing.assert_allclose(b.upper, a.upper)
@@ -57,7 +63,11 @@ def test_unknown_robot_lists_the_bundled_ones():
         ("joints:\n  - {name: a, type: spherical}\n", "joints[a].type", "valid: revolute, prismatic"),
         ("joints:\n  - {name: a, origin: {xyz: [0, 0]}}\n", "joints[a].origin.xyz", "list of 3 numbers"),
         ("joints:\n  - {name: a, origin: {xyz: [0, 0, one]}}\n", "joints[a].origin.xyz[2]", "not a number"),
-        ("joints:\n  - {name: a, origin: {rotation: [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}\n", "joints[a].origin.rotation", "not a rotation"),
+        (
+            "joints:\n  - {name: a, origin: {rotation: [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}\n",
+            "joints[a].origin.rotation",
+            "not a rotation",
+        ),
         ("joints:\n  - {name: a, limits: {lower: 1, upper: 0}}\n", "joints[a].limits", "lower 1.0 > upper 0.0"),
         ("joints:\n  - {name: a, limits: {velocity: 0}}\n", "joints[a].limits.velocity", "positive"),
         ("units: km\njoints:\n  - {name: a}\n", "units", "valid: m, mm"),

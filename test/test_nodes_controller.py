@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from node_harness import Harness, statuses
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -15,7 +16,6 @@ from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller import CartesianControllerNode
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, rpy_to_matrix
-from node_harness import Harness, statuses
 
 MODEL = load_robot("genova7")
 Q0 = MODEL.start_configuration()
@@ -58,7 +58,9 @@ def test_zeros_without_joint_state_or_goal_then_tracks(harness):
     node, commands, diagnostics = _start(harness)
     assert harness.spin_until(lambda: len(commands) > 10, 5)
     assert all(len(c.data) == 7 and not any(c.data) for c in commands)
-    assert harness.spin_until(lambda: any(s.message == "stale input" for s in statuses(diagnostics, "cartesian_controller")), 3)
+    assert harness.spin_until(
+        lambda: any(s.message == "stale input" for s in statuses(diagnostics, "cartesian_controller")), 3
+    )
     # Joint states (names shuffled: matched by name) but no goal: idle, zeros.
     shuffled = list(reversed(MODEL.joint_names))
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0, shuffled))  # noqa: E731
@@ -75,7 +77,11 @@ def test_zeros_without_joint_state_or_goal_then_tracks(harness):
     np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-9)
     assert np.linalg.norm(commands[-1].data) > 0.1
     status = harness.spin_until(
-        lambda: [s for s in statuses(diagnostics, "cartesian_controller") if _values(s)["goal_stamp"] == "123.000000456"], 3, every=stream
+        lambda: [
+            s for s in statuses(diagnostics, "cartesian_controller") if _values(s)["goal_stamp"] == "123.000000456"
+        ],
+        3,
+        every=stream,
     )[-1]
     values = _values(status)
     current = frame_pose(MODEL, Q0)
@@ -120,7 +126,11 @@ def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
         harness.publish("/goal_pose", msg)
     harness.publish("/goal_twist", bad_twist)
     harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names[:3], [0.0, 0.0, 0.0]))
-    assert harness.spin_until(lambda: node.rejected_goals == 3 and node.rejected_twists == 1 and node.rejected_joint_states == 1, 3, every=stream)
+    assert harness.spin_until(
+        lambda: node.rejected_goals == 3 and node.rejected_twists == 1 and node.rejected_joint_states == 1,
+        3,
+        every=stream,
+    )
     commands.clear()
     harness.spin_for(0.1, every=stream)
     np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-9)
@@ -136,5 +146,7 @@ def test_converged_state(harness):
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
     harness.publish("/goal_pose", conv.make_pose_stamped(goal, "base_link"))
     assert harness.spin_until(lambda: node.state == "converged", 3, every=stream)
-    assert harness.spin_until(lambda: any(s.message == "converged" for s in statuses(diagnostics, "cartesian_controller")), 2, every=stream)
+    assert harness.spin_until(
+        lambda: any(s.message == "converged" for s in statuses(diagnostics, "cartesian_controller")), 2, every=stream
+    )
     assert np.linalg.norm(commands[-1].data) < 0.01

@@ -7,6 +7,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Path
+from node_harness import Harness, statuses
 from sensor_msgs.msg import JointState
 
 from manip_kin.kinematics import frame_pose
@@ -15,7 +16,6 @@ from manip_kin.nodes.trajectory_generator import TrajectoryGeneratorNode
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, rpy_to_matrix
 from manip_kin.trajectory import distance_to_segment
-from node_harness import Harness, statuses
 
 MODEL = load_robot("irb120")
 Q0 = np.zeros(6)
@@ -44,7 +44,9 @@ def _start(harness, **params):
 def _state_stream(harness, pose=START, q=Q0):
     def stream():
         # Stamped now: the generator judges the tool pose's age by its stamp.
-        harness.publish("/tool_pose", conv.make_pose_stamped(pose, "base_link", harness.node.get_clock().now().to_msg()))
+        harness.publish(
+            "/tool_pose", conv.make_pose_stamped(pose, "base_link", harness.node.get_clock().now().to_msg())
+        )
         harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, q))
 
     return stream
@@ -52,7 +54,9 @@ def _state_stream(harness, pose=START, q=Q0):
 
 @pytest.mark.parametrize("scaling", ["trapezoidal", "quintic", "constant"])
 def test_streams_line_then_holds(harness, scaling):
-    node, goals, twists, paths, diagnostics = _start(harness, time_scaling=scaling, max_linear_velocity=0.3, max_linear_acceleration=1.0)
+    node, goals, twists, paths, diagnostics = _start(
+        harness, time_scaling=scaling, max_linear_velocity=0.3, max_linear_acceleration=1.0
+    )
     stream = _state_stream(harness)
     harness.spin_for(0.1, every=stream)
     assert not goals  # nothing streamed before a target
@@ -79,7 +83,9 @@ def test_streams_line_then_holds(harness, scaling):
     assert speeds.max() <= 0.3 + 1e-9
     # Twist direction is the line direction; the last goal is the target with zero twist.
     direction = (TARGET[:3, 3] - START[:3, 3]) / length
-    moving = [conv.twist_to_arrays(t.twist)[1] for t in twists if np.linalg.norm(conv.twist_to_arrays(t.twist)[1]) > 1e-6]
+    moving = [
+        conv.twist_to_arrays(t.twist)[1] for t in twists if np.linalg.norm(conv.twist_to_arrays(t.twist)[1]) > 1e-6
+    ]
     np.testing.assert_allclose([v / np.linalg.norm(v) for v in moving], np.tile(direction, (len(moving), 1)), atol=1e-9)
     np.testing.assert_allclose(conv.pose_stamped_to_matrix(goals[-1]), TARGET, atol=1e-12)
     assert not any(np.concatenate(conv.twist_to_arrays(twists[-1].twist)))
@@ -89,7 +95,9 @@ def test_streams_line_then_holds(harness, scaling):
     assert len(goals) == count
     held = [s for s in statuses(diagnostics, "trajectory_generator") if s.message == "holding"]
     values = {kv.key: kv.value for kv in held[-1].values}
-    assert values["target_stamp"] == "0.000000077" and values["final_goal_stamp"] == conv.stamp_key(goals[-1].header.stamp)
+    assert values["target_stamp"] == "0.000000077" and values["final_goal_stamp"] == conv.stamp_key(
+        goals[-1].header.stamp
+    )
 
 
 def test_rejects_bad_and_unreachable_targets(harness, capfd):

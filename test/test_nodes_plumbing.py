@@ -82,7 +82,9 @@ def test_help_lists_parameters_topics_and_example(executable):
 
 def test_bad_parameter_exits_2_with_one_line():
     path = Path(sys.executable).parent / "robot_state"
-    result = subprocess.run([str(path), "--ros-args", "-p", "robot:=nosuchbot"], capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [str(path), "--ros-args", "-p", "robot:=nosuchbot"], capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 2
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "nosuchbot" in errors[0]

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from node_harness import Harness, statuses
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
@@ -15,7 +16,6 @@ from manip_kin.kinematics import frame_pose, frame_twist
 from manip_kin.nodes.conversions import array_to_multiarray, pose_stamped_to_matrix, stamp_to_seconds, twist_to_arrays
 from manip_kin.nodes.robot_state import RobotStateNode
 from manip_kin.robots import load_robot
-from node_harness import Harness, statuses
 
 
 @pytest.fixture
@@ -37,7 +37,9 @@ def test_publishes_state_poses_twists_and_description(harness):
     ee_twists = harness.collect(TwistStamped, "/ee_twist")
     tool_twists = harness.collect(TwistStamped, "/tool_twist")
     harness.start(RobotStateNode, robot="genova7", rate_hz=200.0)
-    assert harness.spin_until(lambda: len(joint_states) > 20 and len(tool_poses) > 20 and tool_twists and ee_twists and ee_poses, 10)
+    assert harness.spin_until(
+        lambda: len(joint_states) > 20 and len(tool_poses) > 20 and tool_twists and ee_twists and ee_poses, 10
+    )
     # Latched: a subscriber that joins late still gets the description.
     descriptions = harness.collect(String, "/robot_description", latched=True)
     assert harness.spin_until(lambda: descriptions, 5)
@@ -111,7 +113,9 @@ def test_rejects_bad_commands_and_keeps_running(harness, capfd):
     np.testing.assert_allclose(joint_states[-1].position, 0.0)
     np.testing.assert_allclose(joint_states[-1].velocity, 0.0)
     # The node still obeys a good command afterwards.
-    harness.spin_for(0.3, every=lambda: harness.publish("/joint_velocity_commands", Float64MultiArray(data=[0.5, 0, 0, 0, 0, 0])))
+    harness.spin_for(
+        0.3, every=lambda: harness.publish("/joint_velocity_commands", Float64MultiArray(data=[0.5, 0, 0, 0, 0, 0]))
+    )
     assert joint_states[-1].position[0] > 0.05
     logged = capfd.readouterr().err
     assert "has 5 values; valid: 6" in logged and "NaN or infinity" in logged
@@ -129,7 +133,13 @@ def test_position_and_velocity_limits(harness):
     harness.spin_for(0.6, every=lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(down)))
     state = joint_states[-1]
     assert state.position[5] == 0.0 and state.velocity[5] == 0.0
-    assert harness.spin_until(lambda: any(s.values and "joint6" in dict((kv.key, kv.value) for kv in s.values)["joints_at_limit"] for s in statuses(diagnostics, "robot_state")), 2)
+    assert harness.spin_until(
+        lambda: any(
+            s.values and "joint6" in dict((kv.key, kv.value) for kv in s.values)["joints_at_limit"]
+            for s in statuses(diagnostics, "robot_state")
+        ),
+        2,
+    )
     # 10 rad/s on joint1 and 1 rad/s on joint2: scaled together to joint1's 2 rad/s limit.
     fast = np.zeros(7)
     fast[0], fast[1] = 10.0, 1.0
@@ -147,5 +157,7 @@ def test_bad_parameters_stop_the_node(harness):
         harness.start(RobotStateNode, robot="irb120", initial_positions=[4.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="rate_hz"):
         harness.start(RobotStateNode, robot="irb120", rate_hz=-5.0)
-    node = harness.start(RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100)  # integers accepted
+    node = harness.start(
+        RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100
+    )  # integers accepted
     np.testing.assert_allclose(node.integrator.q, [0, 1, 0, 0, 0, 0])

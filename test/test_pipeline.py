@@ -29,7 +29,9 @@ def run_cli(pipeline, *args, timeout=60):
 def genova(tmp_path_factory):
     """genova7 at the default 500 Hz, scenario gains 0.8/0.8."""
     # Each module-scoped pipeline on its own domain: both are alive while this module runs.
-    pipeline = Pipeline(pipeline_processes("genova7"), env=fresh_domain_env(), log_dir=tmp_path_factory.mktemp("genova_logs"))
+    pipeline = Pipeline(
+        pipeline_processes("genova7"), env=fresh_domain_env(), log_dir=tmp_path_factory.mktemp("genova_logs")
+    )
     pipeline.start()
     yield pipeline
     codes = pipeline.stop()
@@ -38,7 +40,9 @@ def genova(tmp_path_factory):
 
 def test_goal_wait_reaches_genova7_pose_goal(genova):
     start = time.monotonic()
-    result = run_cli(genova, "goal", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "40", "--json")
+    result = run_cli(
+        genova, "goal", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "40", "--json"
+    )
     elapsed = time.monotonic() - start
     assert result.returncode == 0, result.stderr + result.stdout
     payload = json.loads(result.stdout)
@@ -61,7 +65,9 @@ def test_bad_messages_rejected_while_pipeline_runs(genova):
     unnormalised = conv.make_pose_stamped(GENOVA_GOAL, "base_link")
     unnormalised.pose.orientation.w += 0.5
     wrong_frame = conv.make_pose_stamped(GENOVA_GOAL, "map")
-    before = {name: client.wait_status(name) for name in ("robot_state", "cartesian_controller", "trajectory_generator")}
+    before = {
+        name: client.wait_status(name) for name in ("robot_state", "cartesian_controller", "trajectory_generator")
+    }
     for msg in (nan_goal, unnormalised, wrong_frame):
         client.publish_delivered("/goal_pose", msg)
     for data in ([0.1] * 3, [math.nan] * 7):
@@ -71,22 +77,33 @@ def test_bad_messages_rejected_while_pipeline_runs(genova):
     client.publish_delivered("/line_target", wrong_frame)
 
     def counters():
-        c = client.latest_status("cartesian_controller").number("rejected_goals") - before["cartesian_controller"].number("rejected_goals")
-        r = client.latest_status("robot_state").number("rejected_commands") - before["robot_state"].number("rejected_commands")
-        t = client.latest_status("trajectory_generator").number("rejected_targets") - before["trajectory_generator"].number("rejected_targets")
+        c = client.latest_status("cartesian_controller").number("rejected_goals") - before[
+            "cartesian_controller"
+        ].number("rejected_goals")
+        r = client.latest_status("robot_state").number("rejected_commands") - before["robot_state"].number(
+            "rejected_commands"
+        )
+        t = client.latest_status("trajectory_generator").number("rejected_targets") - before[
+            "trajectory_generator"
+        ].number("rejected_targets")
         return c == 3 and r == 2 and t == 2
 
     assert client.spin_until(counters, 10), {n: client.latest_status(n).values for n in before}
     assert all(genova.running(name) for name in before)
     logs = {name: genova.log_text(name) for name in before}
-    assert "rejected /goal_pose" in logs["cartesian_controller"] and "'map' is not the base frame" in logs["cartesian_controller"]
+    assert (
+        "rejected /goal_pose" in logs["cartesian_controller"]
+        and "'map' is not the base frame" in logs["cartesian_controller"]
+    )
     assert "has length" in logs["cartesian_controller"] and "NaN or infinity" in logs["cartesian_controller"]
     assert "has 3 values; valid: 7" in logs["robot_state"] and "NaN or infinity" in logs["robot_state"]
     assert "leaves the arm's reach" in logs["trajectory_generator"]
     # The previous goal is kept and the pipeline still follows a new one.
     q = client.current_positions()
     assert np.all(np.isfinite(q))
-    result = run_cli(genova, "goal", "--xyz", "0.2", "-0.65", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "30")
+    result = run_cli(
+        genova, "goal", "--xyz", "0.2", "-0.65", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "30"
+    )
     assert result.returncode == 0, result.stderr
     assert "converged" in result.stdout
 
@@ -98,7 +115,13 @@ def test_cli_errors_exit_2(genova):
     assert quat.returncode == 2 and "unit quaternion" in quat.stderr
     # Nobody listens on another domain: one line, exit 2.
     env = dict(genova.env, ROS_DOMAIN_ID=str((int(genova.env["ROS_DOMAIN_ID"]) + 50) % 101 or 1))
-    lonely = subprocess.run([MANIP_KIN, "goal", "--xyz", "0.1", "0", "0.5", "--timeout", "1"], env=env, capture_output=True, text=True, timeout=30)
+    lonely = subprocess.run(
+        [MANIP_KIN, "goal", "--xyz", "0.1", "0", "0.5", "--timeout", "1"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert lonely.returncode == 2 and "no subscriber on /goal_pose" in lonely.stderr
     assert len(lonely.stderr.strip().splitlines()) == 1
 
@@ -118,6 +141,21 @@ def test_controller_killed_and_restarted_recovers(genova):
     assert client.joint_state is not None and not any(client.joint_state.velocity)
     genova.restart_process("cartesian_controller")
     assert client.wait_status("cartesian_controller").message in ("idle", "stale input")
-    result = run_cli(genova, "goal", "--xyz", "0.15", "-0.9", "0.35", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "40", "--json")
+    result = run_cli(
+        genova,
+        "goal",
+        "--xyz",
+        "0.15",
+        "-0.9",
+        "0.35",
+        "--rpy",
+        "0",
+        "1.57",
+        "0",
+        "--wait",
+        "--timeout",
+        "40",
+        "--json",
+    )
     assert result.returncode == 0, result.stderr + genova.log_tail("cartesian_controller")
     assert json.loads(result.stdout)["final_error"]["position"] < 1e-4

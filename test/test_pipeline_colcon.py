@@ -30,8 +30,26 @@ def test_installed_pipeline_reaches_goal(installed, tmp_path):
             command_line = Path(f"/proc/{pipeline.pid(name)}/cmdline").read_bytes().split(b"\0")
             assert str(lib).encode() in command_line[1], command_line
         result = subprocess.run(
-            [str(lib / "manip_kin"), "goal", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "30", "--json"],
-            env=pipeline.env, capture_output=True, text=True, timeout=60,
+            [
+                str(lib / "manip_kin"),
+                "goal",
+                "--xyz",
+                "0.2",
+                "-0.7",
+                "0.3",
+                "--rpy",
+                "0",
+                "1.57",
+                "0",
+                "--wait",
+                "--timeout",
+                "30",
+                "--json",
+            ],
+            env=pipeline.env,
+            capture_output=True,
+            text=True,
+            timeout=60,
         )
         assert result.returncode == 0, result.stderr + pipeline.log_tail("cartesian_controller")
         payload = json.loads(result.stdout)

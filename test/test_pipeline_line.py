@@ -44,11 +44,15 @@ def irb120(tmp_path_factory):
 
 def test_irb120_line_tracked_along_the_segment(irb120):
     start, end = [0.4, 0.1, 0.6], [-0.4, 0.3, 0.5]
-    first = run_cli(irb120, "goal", "--xyz", *map(str, start), "--rpy", "0", str(math.pi / 2), "0", "--wait", "--timeout", "30")
+    first = run_cli(
+        irb120, "goal", "--xyz", *map(str, start), "--rpy", "0", str(math.pi / 2), "0", "--wait", "--timeout", "30"
+    )
     assert first.returncode == 0, first.stderr
     client = irb120.client()
     samples = []
-    client.node.create_subscription(PoseStamped, "/tool_pose", lambda m: samples.append(conv.pose_stamped_to_matrix(m)), 1000)
+    client.node.create_subscription(
+        PoseStamped, "/tool_pose", lambda m: samples.append(conv.pose_stamped_to_matrix(m)), 1000
+    )
     client.spin_for(0.2)
     target = client.send_line(make_transform(DOWN, end))
     done = client.wait_line_done(target, 15)
@@ -68,6 +72,8 @@ def test_irb120_line_tracked_along_the_segment(irb120):
 
 
 def test_irb120_line_out_of_reach_rejected_by_cli(irb120):
-    result = run_cli(irb120, "line", "--xyz", "1.2", "0.0", "0.5", "--rpy", "0", str(math.pi / 2), "0", "--wait", "--timeout", "10")
+    result = run_cli(
+        irb120, "line", "--xyz", "1.2", "0.0", "0.5", "--rpy", "0", str(math.pi / 2), "0", "--wait", "--timeout", "10"
+    )
     assert result.returncode == 2
     assert "target rejected" in result.stderr and "reach" in result.stderr

@@ -17,16 +17,15 @@ from pathlib import Path
 
 import pytest
 import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TwistStamped
 from mcap.reader import make_reader
+from nav_msgs.msg import Path as PathMsg
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader as Rosbag2Reader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, TwistStamped
-from nav_msgs.msg import Path as PathMsg
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
@@ -97,8 +96,13 @@ def make_messages(i: int) -> dict[str, object]:
         path.poses.append(waypoint)
     diagnostics = DiagnosticArray()
     diagnostics.status = [
-        DiagnosticStatus(level=bytes([i % 3]), name="controller", message=f"step {i}", hardware_id="",
-                         values=[KeyValue(key="manipulability", value=f"{0.01 * i:.3f}")])
+        DiagnosticStatus(
+            level=bytes([i % 3]),
+            name="controller",
+            message=f"step {i}",
+            hardware_id="",
+            values=[KeyValue(key="manipulability", value=f"{0.01 * i:.3f}")],
+        )
     ]
     stamp_ns = T0 + i * 10 * MS + 123
     for msg in (joint_state, pose, twist, diagnostics):
@@ -121,8 +125,11 @@ def write_recording(output: Path, compression: str = "zstd", chunk_size: int = 2
     """Write N_MESSAGES per topic; return what was written, per topic, in order."""
     written: dict[str, list] = {topic: [] for topic in TYPES}
     with RecordingWriter(output, compression=compression, chunk_size=chunk_size) as writer:
-        writer.add_topic("/robot_description", "std_msgs/msg/String",
-                         offered_qos_profiles=default_offer(transient_local=True, depth=1))
+        writer.add_topic(
+            "/robot_description",
+            "std_msgs/msg/String",
+            offered_qos_profiles=default_offer(transient_local=True, depth=1),
+        )
         for i in range(N_MESSAGES):
             for topic, msg in make_messages(i).items():
                 writer.write(topic, msg, log_time_ns=T0 + i * 10 * MS + 500)
@@ -161,8 +168,15 @@ def test_header_schema_and_channels_follow_rosbag2(recordings):
         assert channel.metadata["topic_type_hash"] == rosidl_type_hash(schema.name)
         profiles = yaml.safe_load(channel.metadata["offered_qos_profiles"])
         assert list(profiles[0]) == [
-            "history", "depth", "reliability", "durability", "deadline", "lifespan",
-            "liveliness", "liveliness_lease_duration", "avoid_ros_namespace_conventions",
+            "history",
+            "depth",
+            "reliability",
+            "durability",
+            "deadline",
+            "lifespan",
+            "liveliness",
+            "liveliness_lease_duration",
+            "avoid_ros_namespace_conventions",
         ]
     description = next(c for c in summary.channels.values() if c.topic == "/robot_description")
     assert parse_profiles(description.metadata["offered_qos_profiles"]).is_transient_local
@@ -210,10 +224,16 @@ def test_type_hashes_equal_what_rclpy_reports_at_runtime():
     rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     try:
         node = rclpy.create_node("hash_probe", context=context)
-        classes = {"sensor_msgs/msg/JointState": JointState, "geometry_msgs/msg/PoseStamped": PoseStamped,
-                   "geometry_msgs/msg/TwistStamped": TwistStamped, "std_msgs/msg/Float64MultiArray": Float64MultiArray,
-                   "std_msgs/msg/String": String, "nav_msgs/msg/Path": PathMsg,
-                   "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray, "rosgraph_msgs/msg/Clock": Clock}
+        classes = {
+            "sensor_msgs/msg/JointState": JointState,
+            "geometry_msgs/msg/PoseStamped": PoseStamped,
+            "geometry_msgs/msg/TwistStamped": TwistStamped,
+            "std_msgs/msg/Float64MultiArray": Float64MultiArray,
+            "std_msgs/msg/String": String,
+            "nav_msgs/msg/Path": PathMsg,
+            "diagnostic_msgs/msg/DiagnosticArray": DiagnosticArray,
+            "rosgraph_msgs/msg/Clock": Clock,
+        }
         for index, cls in enumerate(classes.values()):
             node.create_publisher(cls, f"/hash_probe_{index}", 1)
         reported = {}
@@ -412,7 +432,9 @@ def test_cli_info_json(recordings, capsys):
 def test_cli_info_of_a_bad_file_is_one_line_and_exit_2(recordings, tmp_path, content):
     bad = tmp_path / f"{content}.mcap"
     source = (recordings["root"] / "run.mcap").read_bytes()
-    bad.write_bytes({"garbage": b"not an mcap file\n" * 50, "truncated": source[: len(source) // 2], "empty": b""}[content])
+    bad.write_bytes(
+        {"garbage": b"not an mcap file\n" * 50, "truncated": source[: len(source) // 2], "empty": b""}[content]
+    )
     result = subprocess.run([str(MANIP_KIN), "info", str(bad)], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stdout == ""

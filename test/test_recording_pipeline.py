@@ -79,7 +79,9 @@ def test_rosbags_reads_every_message_the_test_saw_with_the_same_values(recorded_
                 recorded_tool[key] = np.array([p.x, p.y, p.z])
     # Discovery settles in the first moments after a subscription appears; from 0.5 s after the
     # recorder's first message on, every message this test saw must be in the file.
-    settled = {topic: _plus_seconds(min(keys), 0.5) for topic, keys in (("states", recorded_states), ("tool", recorded_tool))}
+    settled = {
+        topic: _plus_seconds(min(keys), 0.5) for topic, keys in (("states", recorded_states), ("tool", recorded_tool))
+    }
     checked = 0
     for message in seen_states:
         key = (message.header.stamp.sec, message.header.stamp.nanosec)
@@ -107,10 +109,17 @@ def test_rclpy_reader_counts_match_info(recorded_run):
     path = recorded_run[0]
     info = read_info(path)
     counts: dict[str, int] = {}
-    for topic, message, log_time_ns, publish_time_ns in read_messages(path):
+    for topic, _message, log_time_ns, publish_time_ns in read_messages(path):
         counts[topic] = counts.get(topic, 0) + 1
         assert log_time_ns > 0 and publish_time_ns > 0
-    for topic in ("/joint_states", "/tool_pose", "/joint_velocity_commands", "/robot_description", "/goal_pose", "/line_target"):
+    for topic in (
+        "/joint_states",
+        "/tool_pose",
+        "/joint_velocity_commands",
+        "/robot_description",
+        "/goal_pose",
+        "/line_target",
+    ):
         assert counts.get(topic, 0) == info.topic(topic).message_count > 0, topic
     assert counts["/robot_description"] == 1 and counts["/line_target"] == 1
 
@@ -130,7 +139,9 @@ def _figures_in(directory: Path) -> set[str]:
 def test_plot_writes_every_figure_from_the_recorded_run(recorded_run, tmp_path):
     result = subprocess.run(
         [str(MANIP_KIN), "plot", str(recorded_run[0]), "--out", str(tmp_path / "plots")],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert result.returncode == 0, result.stderr
     assert _figures_in(tmp_path / "plots") == set(FIGURES)
@@ -142,7 +153,9 @@ def test_replayed_and_re_recorded_run_plots_too(recorded_run, tmp_path):
     with Pipeline([recorder]) as pipeline:
         replay = subprocess.run(
             [str(MANIP_KIN), "replay", str(recorded_run[0]), "--rate", "4", "--wait-for-subscribers", "8", "--quiet"],
-            capture_output=True, text=True, timeout=120,
+            capture_output=True,
+            text=True,
+            timeout=120,
         )
         assert replay.returncode == 0, replay.stderr
         assert pipeline.stop_process("recorder", timeout=15) == 0
@@ -152,7 +165,9 @@ def test_replayed_and_re_recorded_run_plots_too(recorded_run, tmp_path):
         assert copy.topic(topic).message_count == original.topic(topic).message_count, topic
     result = subprocess.run(
         [str(MANIP_KIN), "plot", str(re_recorded), "--out", str(tmp_path / "plots")],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert result.returncode == 0, result.stderr
     assert _figures_in(tmp_path / "plots") == set(FIGURES)

@@ -131,9 +131,7 @@ def test_signal_ends_with_complete_file_holding_every_message(ros, processes, tm
     # Receive time: after the send, well within a second of it.
     assert all(0 <= log - sent < 1_000_000_000 for log, sent in zip(log_times, send_times))
 
-    endpoints = {
-        topic: ros.get_publishers_info_by_topic(topic)[0] for topic in ("/joint_states", "/robot_description")
-    }
+    endpoints = {topic: ros.get_publishers_info_by_topic(topic)[0] for topic in ("/joint_states", "/robot_description")}
     for topic in info.topics:
         # rosidl's hash as rclpy reports it for the live publisher.
         assert topic.type_hash == str(endpoints[topic.name].topic_type_hash)
@@ -179,7 +177,9 @@ def test_sigkill_then_salvage_recovers_all_but_the_last_second(ros, processes, t
 
 
 def test_max_messages_ends_the_recording_by_itself(ros, processes, tmp_path):
-    states = ros.create_publisher(JointState, "/probe/joint_states", QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+    states = ros.create_publisher(
+        JointState, "/probe/joint_states", QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+    )
     output = tmp_path / "limited.mcap"
     recorder = start_recorder(processes, output, "all_topics:=true", "max_messages:=40", "compression:=none")
     wait_subscribed([states], recorder)

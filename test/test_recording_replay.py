@@ -39,8 +39,11 @@ DURATION_S = (LOG_TIMES[-1] - LOG_TIMES[0]) / 1e9
 def recording(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("replay") / "run.mcap"
     with RecordingWriter(path) as writer:
-        writer.add_topic("/robot_description", "std_msgs/msg/String",
-                         offered_qos_profiles=default_offer(transient_local=True, depth=1))
+        writer.add_topic(
+            "/robot_description",
+            "std_msgs/msg/String",
+            offered_qos_profiles=default_offer(transient_local=True, depth=1),
+        )
         writer.write("/robot_description", String(data="<robot name='r'/>"), log_time_ns=LOG_TIMES[0])
         for i, log_time in enumerate(LOG_TIMES):
             message = JointState(name=["joint_1"], position=[float(i)])

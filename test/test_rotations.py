@@ -30,7 +30,11 @@ from manip_kin.rotations import (
 )
 
 angles = st.floats(min_value=-math.pi, max_value=math.pi, allow_nan=False)
-unit_vectors = st.tuples(*[st.floats(-1, 1)] * 3).filter(lambda v: 0.1 < np.linalg.norm(v)).map(lambda v: np.array(v) / np.linalg.norm(v))
+unit_vectors = (
+    st.tuples(*[st.floats(-1, 1)] * 3)
+    .filter(lambda v: 0.1 < np.linalg.norm(v))
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
 
 
 @given(angles, st.floats(-1.5, 1.5), angles)
@@ -59,7 +63,9 @@ def test_rotvec_round_trip_and_agreement_with_rodrigues(axis, angle):
     assert np.linalg.norm(recovered) <= math.pi + 1e-12
 
 
-@pytest.mark.parametrize("angle", [0.0, 1e-12, 1e-9, 1e-6, 1e-3, math.pi - 1e-3, math.pi - 1e-6, math.pi - 1e-9, math.pi])
+@pytest.mark.parametrize(
+    "angle", [0.0, 1e-12, 1e-9, 1e-6, 1e-3, math.pi - 1e-3, math.pi - 1e-6, math.pi - 1e-9, math.pi]
+)
 def test_rotvec_is_exact_near_zero_and_near_pi(angle):
     axis = np.array([0.36, -0.48, 0.8])
     rotation = rodrigues(axis, angle)
@@ -80,7 +86,11 @@ def test_quaternion_round_trip_and_unit_length(axis, angle):
     assert np.linalg.norm(quat) == pytest.approx(1.0, abs=1e-12)
     assert quat[3] >= 0.0
     np.testing.assert_allclose(quat_to_matrix(quat), rotation, atol=1e-12)
-    np.testing.assert_allclose(quat[:3], axis * math.sin(angle / 2) * (1 if quat[3] > 0 or angle < math.pi else np.sign(quat[:3] @ axis)), atol=1e-9)
+    np.testing.assert_allclose(
+        quat[:3],
+        axis * math.sin(angle / 2) * (1 if quat[3] > 0 or angle < math.pi else np.sign(quat[:3] @ axis)),
+        atol=1e-9,
+    )
 
 
 def test_quaternion_of_identity_and_of_half_turns():
@@ -94,7 +104,9 @@ def test_slerp_moves_at_constant_angular_rate():
     start = matrix_to_quat(np.eye(3))
     end = matrix_to_quat(rodrigues([0, 0, 1], 2.0))
     for fraction in (0.0, 0.25, 0.5, 1.0):
-        np.testing.assert_allclose(quat_to_matrix(quat_slerp(start, end, fraction)), rodrigues([0, 0, 1], 2.0 * fraction), atol=1e-12)
+        np.testing.assert_allclose(
+            quat_to_matrix(quat_slerp(start, end, fraction)), rodrigues([0, 0, 1], 2.0 * fraction), atol=1e-12
+        )
 
 
 @settings(max_examples=50)

@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 import pytest
-
 from kin_reference import rodrigues
+
 from manip_kin.control import ControllerConfig, pose_error
 from manip_kin.errors import InvalidArgumentError, ManipKinError
 from manip_kin.kinematics import frame_pose
@@ -29,7 +29,9 @@ def genova7():
 
 @pytest.fixture(scope="module")
 def pose_goal_run(genova7):
-    return simulate(genova7, genova7.initial_positions, GENOVA7_GOAL, ControllerConfig(), dt=0.001, duration=18.0, record_every=10)
+    return simulate(
+        genova7, genova7.initial_positions, GENOVA7_GOAL, ControllerConfig(), dt=0.001, duration=18.0, record_every=10
+    )
 
 
 def test_genova7_pose_goal_converges_within_18_s(genova7, pose_goal_run):
@@ -67,7 +69,9 @@ def test_genova7_pose_goal_hits_the_prismatic_limit_without_exceeding_any(genova
 
 def test_clamping_the_position_alone_stalls_millimetres_short(genova7, pose_goal_run):
     config = ControllerConfig(respect_position_limits=False)
-    result = simulate(genova7, genova7.initial_positions, GENOVA7_GOAL, config, dt=0.001, duration=18.0, record_every=100)
+    result = simulate(
+        genova7, genova7.initial_positions, GENOVA7_GOAL, config, dt=0.001, duration=18.0, record_every=100
+    )
     assert not result.converged
     assert result.time_to_converge is None
     assert 1e-3 < result.final_position_error < 0.05  # millimetres short of the goal
@@ -115,7 +119,14 @@ def test_feed_forward_tracks_a_moving_goal_to_discretisation_level(genova7):
     errors = {}
     for dt in (0.002, 0.001):
         result = simulate(
-            genova7, start, goal_pose(0.0), dt=dt, duration=3.0, goal_pose_fn=goal_pose, goal_twist_fn=goal_twist, record_every=10
+            genova7,
+            start,
+            goal_pose(0.0),
+            dt=dt,
+            duration=3.0,
+            goal_pose_fn=goal_pose,
+            goal_twist_fn=goal_twist,
+            record_every=10,
         )
         errors[dt] = (result.final_position_error, result.final_orientation_error)
     without = simulate(genova7, start, goal_pose(0.0), dt=0.001, duration=3.0, goal_pose_fn=goal_pose, record_every=10)
@@ -133,7 +144,14 @@ def test_moving_goal_convergence_time(genova7):
     start = np.array(genova7.initial_positions)
     goal_pose, goal_twist = _line_goal(frame_pose(genova7, start), np.array([0.0, 0.01, 0.0]))
     result = simulate(
-        genova7, start, goal_pose(0.0), dt=0.001, duration=1.0, tolerance=1e-5, goal_pose_fn=goal_pose, goal_twist_fn=goal_twist
+        genova7,
+        start,
+        goal_pose(0.0),
+        dt=0.001,
+        duration=1.0,
+        tolerance=1e-5,
+        goal_pose_fn=goal_pose,
+        goal_twist_fn=goal_twist,
     )
     assert result.converged and result.time_to_converge == 0.0  # starts on the goal and stays there
     assert result.steps == 1000
@@ -177,7 +195,9 @@ def test_out_of_reach_position_ends_at_the_closest_reachable_point():
     model = load_robot("irb120")
     target = np.array([2.0, 0.3, 0.5])
     config = ControllerConfig(task="position")
-    result = simulate(model, np.zeros(6), make_transform(np.eye(3), target), config, dt=0.001, duration=6.0, record_every=50)
+    result = simulate(
+        model, np.zeros(6), make_transform(np.eye(3), target), config, dt=0.001, duration=6.0, record_every=50
+    )
     assert not result.converged and "out of reach" in result.reason
     # No configuration gets closer than where the arm stopped (dense random sampling).
     rng = np.random.default_rng(11)
@@ -196,7 +216,9 @@ def test_recording_shapes_and_twists(genova7):
     result = simulate(genova7, start, goal, dt=0.001, duration=0.5, tolerance=1e-9, record_every=5)
     count = len(result.time)
     assert count == 101  # every 5th of 500 steps, plus the final state
-    assert result.q.shape == (count, 7) and result.frame_pose.shape == (count, 4, 4) and result.twist.shape == (count, 6)
+    assert (
+        result.q.shape == (count, 7) and result.frame_pose.shape == (count, 4, 4) and result.twist.shape == (count, 6)
+    )
     np.testing.assert_allclose(result.time[1] - result.time[0], 0.005)
     np.testing.assert_allclose(result.frame_pose[0], current, atol=1e-12)
     # Recorded linear velocity = central difference of the recorded positions (samples 5 ms apart).

@@ -8,7 +8,14 @@ import pytest
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose
 from manip_kin.robots import load_robot
-from manip_kin.rotations import make_transform, matrix_to_quat, matrix_to_rotvec, quat_slerp, quat_to_matrix, rpy_to_matrix
+from manip_kin.rotations import (
+    make_transform,
+    matrix_to_quat,
+    matrix_to_rotvec,
+    quat_slerp,
+    quat_to_matrix,
+    rpy_to_matrix,
+)
 from manip_kin.trajectory import (
     TIME_SCALINGS,
     LineTrajectory,
@@ -20,7 +27,9 @@ from manip_kin.trajectory import (
 
 START = make_transform(rpy_to_matrix(0.2, -0.4, 1.0), [0.4, 0.1, 0.6])
 GOAL = make_transform(rpy_to_matrix(-0.5, 0.3, 2.2), [-0.4, 0.3, 0.5])
-LIMITS = MotionLimits(max_linear_velocity=0.4, max_linear_acceleration=0.8, max_angular_velocity=0.6, max_angular_acceleration=1.5)
+LIMITS = MotionLimits(
+    max_linear_velocity=0.4, max_linear_acceleration=0.8, max_angular_velocity=0.6, max_angular_acceleration=1.5
+)
 
 
 def _rates(scaling, count=20001):
@@ -60,7 +69,9 @@ def test_peak_velocity_and_acceleration_respected(kind):
     assert math.isclose(scaling.peak_rate * length, linear_peak, rel_tol=1e-3)
     if kind != "constant":
         assert np.abs(sddot).max() * length <= LIMITS.max_linear_acceleration * (1 + 1e-9)
-    active = max(linear_peak / LIMITS.max_linear_velocity, np.abs(sddot).max() * length / LIMITS.max_linear_acceleration)
+    active = max(
+        linear_peak / LIMITS.max_linear_velocity, np.abs(sddot).max() * length / LIMITS.max_linear_acceleration
+    )
     assert active > 0.999 or kind == "constant"
 
 
@@ -149,7 +160,9 @@ def test_reach_check_irb120_line_down_and_unreachable_line():
     report = check_line_reachable(model, approach, np.zeros(6))
     assert report.reachable, report.reason
     np.testing.assert_allclose(frame_pose(model, report.q_end)[:3, 3], [0.4, 0.1, 0.6], atol=1e-4)
-    line = LineTrajectory.plan(start, make_transform(down, [-0.4, 0.3, 0.5]), "constant", MotionLimits(0.4, 1.0, 1.0, 1.0))
+    line = LineTrajectory.plan(
+        start, make_transform(down, [-0.4, 0.3, 0.5]), "constant", MotionLimits(0.4, 1.0, 1.0, 1.0)
+    )
     assert check_line_reachable(model, line, report.q_end).reachable
     too_far = LineTrajectory.plan(start, make_transform(down, [1.5, 0.1, 0.6]))
     far = check_line_reachable(model, too_far, report.q_end)

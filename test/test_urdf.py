@@ -49,9 +49,9 @@ def _rodrigues(axis, angle):
     return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
 
 
-def _homogeneous(rotation=np.eye(3), translation=(0, 0, 0)):
+def _homogeneous(rotation=None, translation=(0, 0, 0)):
     t = np.eye(4)
-    t[:3, :3] = rotation
+    t[:3, :3] = np.eye(3) if rotation is None else rotation
     t[:3, 3] = translation
     return t
 
@@ -119,17 +119,56 @@ def hand_built_small_arm() -> RobotModel:
     bracket = _origin([0.02, 0, 0.1], [0.1, 0.2, 0.3])
     tail = _origin([0, 0, 0.08], [0, 0, -0.785]) @ _origin([0.01, 0, 0.1], [0.2, 0, 0])
     joints = (
-        Joint("j1", JointType.REVOLUTE, mount @ _origin([0, 0, 0.15], [0, 0, 0]), np.array([0, 0, 1.0]),
-              -2.5, 2.5, 1.5, link_name="link1"),
-        Joint("j2", JointType.REVOLUTE, bracket @ _origin([0, 0.03, 0.02], [0.5, 0, 0]),
-              np.array([0, 1.0, 0]), -1.9, 1.2, 1.25, link_name="link2"),
-        Joint("j3", JointType.PRISMATIC, _origin([0.3, 0, 0], [0, 0, 0]), np.array([1, 1, 0]) / math.sqrt(2),
-              0.0, 0.25, 0.5, link_name="link3"),
-        Joint("j4", JointType.REVOLUTE, _origin([0.05, 0.01, -0.02], [-0.4, 0.7, 1.1]), np.array([1.0, 0, 0]),
-              -math.inf, math.inf, 3.0, link_name="link4"),
-        Joint("j5", JointType.REVOLUTE, _origin([0.12, 0, 0], [3.0, -1.2, 0.4]),
-              np.array([0.2, -0.3, 0.9]) / np.linalg.norm([0.2, -0.3, 0.9]), -3.0, 3.0, 2.5,
-              link_name="link5"),
+        Joint(
+            "j1",
+            JointType.REVOLUTE,
+            mount @ _origin([0, 0, 0.15], [0, 0, 0]),
+            np.array([0, 0, 1.0]),
+            -2.5,
+            2.5,
+            1.5,
+            link_name="link1",
+        ),
+        Joint(
+            "j2",
+            JointType.REVOLUTE,
+            bracket @ _origin([0, 0.03, 0.02], [0.5, 0, 0]),
+            np.array([0, 1.0, 0]),
+            -1.9,
+            1.2,
+            1.25,
+            link_name="link2",
+        ),
+        Joint(
+            "j3",
+            JointType.PRISMATIC,
+            _origin([0.3, 0, 0], [0, 0, 0]),
+            np.array([1, 1, 0]) / math.sqrt(2),
+            0.0,
+            0.25,
+            0.5,
+            link_name="link3",
+        ),
+        Joint(
+            "j4",
+            JointType.REVOLUTE,
+            _origin([0.05, 0.01, -0.02], [-0.4, 0.7, 1.1]),
+            np.array([1.0, 0, 0]),
+            -math.inf,
+            math.inf,
+            3.0,
+            link_name="link4",
+        ),
+        Joint(
+            "j5",
+            JointType.REVOLUTE,
+            _origin([0.12, 0, 0], [3.0, -1.2, 0.4]),
+            np.array([0.2, -0.3, 0.9]) / np.linalg.norm([0.2, -0.3, 0.9]),
+            -3.0,
+            3.0,
+            2.5,
+            link_name="link5",
+        ),
     )
     return RobotModel(name="small_arm", joints=joints, ee_offset=tail, base_frame="world")
 
@@ -253,8 +292,12 @@ def test_ur5_loads_as_six_dof():
     ur5 = load_urdf(path)
     assert ur5.dof == 6
     assert ur5.joint_names == [
-        "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
-        "wrist_1_joint", "wrist_2_joint", "wrist_3_joint",
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
     ]
     # world -> base_link branches into the arm and the fixed "base" frame; the walk
     # follows the arm and stops at wrist_3_link, where ee_link and tool0 branch.
@@ -277,15 +320,27 @@ def _dh(d, theta, a, alpha):
 def dh_like_model() -> RobotModel:
     """A DH-style model (frame i at the end of link i via child_offset), with a tool."""
     joints = (
-        Joint("theta1", JointType.REVOLUTE, _dh(0.4, 0, 0, math.pi / 2), child_offset=_dh(0, 0, 0.3, 0),
-              link_name="arm1"),
-        Joint("d2", JointType.PRISMATIC, np.eye(4), lower=-0.5, upper=0.5, velocity_limit=0.5,
-              child_offset=_dh(0.2, math.pi / 2, 0, math.pi / 2), link_name="arm2"),
+        Joint(
+            "theta1", JointType.REVOLUTE, _dh(0.4, 0, 0, math.pi / 2), child_offset=_dh(0, 0, 0.3, 0), link_name="arm1"
+        ),
+        Joint(
+            "d2",
+            JointType.PRISMATIC,
+            np.eye(4),
+            lower=-0.5,
+            upper=0.5,
+            velocity_limit=0.5,
+            child_offset=_dh(0.2, math.pi / 2, 0, math.pi / 2),
+            link_name="arm2",
+        ),
         Joint("theta3", JointType.REVOLUTE, np.eye(4), child_offset=_dh(0.1, 0.3, 0.05, -0.7)),
     )
     return RobotModel(
-        name="dh_like", joints=joints, ee_offset=_origin([0, 0, 0.02], [0, 0, 0.1]),
-        tool=_origin([0.3, 0.1, 0], [math.pi / 6, 0, math.pi / 10]), base_frame="base_link",
+        name="dh_like",
+        joints=joints,
+        ee_offset=_origin([0, 0, 0.02], [0, 0, 0.1]),
+        tool=_origin([0.3, 0.1, 0], [math.pi / 6, 0, math.pi / 10]),
+        base_frame="base_link",
     )
 
 
@@ -293,10 +348,20 @@ def joint_list_model() -> RobotModel:
     """Origins with rotations (one a hair off gimbal lock), non-z axes, a continuous joint."""
     joints = (
         Joint("a", JointType.REVOLUTE, _origin([0, 0, 0.1], [0, 0, 0]), lower=-math.inf, upper=math.inf),
-        Joint("b", JointType.REVOLUTE, _origin([0.1, 0, 0.2], [0.3, math.pi / 2 - 1e-10, -0.8]),
-              axis=np.array([0, 1.0, 0])),
-        Joint("c", JointType.PRISMATIC, _origin([0, 0.05, 0.3], [0, math.pi / 2, 0]),
-              axis=np.array([0.6, 0, 0.8]), lower=0.0, upper=0.3),
+        Joint(
+            "b",
+            JointType.REVOLUTE,
+            _origin([0.1, 0, 0.2], [0.3, math.pi / 2 - 1e-10, -0.8]),
+            axis=np.array([0, 1.0, 0]),
+        ),
+        Joint(
+            "c",
+            JointType.PRISMATIC,
+            _origin([0, 0.05, 0.3], [0, math.pi / 2, 0]),
+            axis=np.array([0.6, 0, 0.8]),
+            lower=0.0,
+            upper=0.3,
+        ),
         Joint("d", JointType.REVOLUTE, _origin([0.2, 0, 0], [1.0, -0.5, 2.0]), axis=np.array([1.0, 0, 0])),
     )
     return RobotModel(name="joint_list", joints=joints, tool=_origin([0, 0, 0.1], [0, 0.2, 0]))
@@ -368,13 +433,17 @@ _near_gimbal = st.sampled_from([0.0, 1e-13, 1e-11, 1e-9, 3e-9, 1e-6]).map(lambda
 
 @settings(max_examples=60, deadline=None)
 @given(
-    roll=_angles, yaw=_angles, pitch=st.one_of(_angles.map(lambda a: a / 2), _near_gimbal),
-    sign=st.sampled_from([1.0, -1.0]), q=st.lists(_angles, min_size=2, max_size=2),
+    roll=_angles,
+    yaw=_angles,
+    pitch=st.one_of(_angles.map(lambda a: a / 2), _near_gimbal),
+    sign=st.sampled_from([1.0, -1.0]),
+    q=st.lists(_angles, min_size=2, max_size=2),
 )
 def test_round_trip_origin_rotations_including_gimbal_lock(roll, pitch, yaw, sign, q):
     origin = _origin([0.1, -0.2, 0.3], [roll, sign * pitch, yaw])
     model = RobotModel(
-        name="r", joints=(Joint("j1", JointType.REVOLUTE, origin), Joint("j2", JointType.REVOLUTE, origin)),
+        name="r",
+        joints=(Joint("j1", JointType.REVOLUTE, origin), Joint("j2", JointType.REVOLUTE, origin)),
         ee_offset=origin,
     )
     assert_round_trip(model, [np.array(q)])
@@ -454,41 +523,53 @@ _ERROR_CASES = {
     "mimic": (_two_joints(extra="<mimic joint='j1'/>"), {}, "joint[j2]/mimic", "mimic joints"),
     "non-numeric-xyz": (
         _two_joints(xyz="0 zero 0.2"),
-        {}, "joint[j2]/origin@xyz", "'0 zero 0.2' is not numeric",
+        {},
+        "joint[j2]/origin@xyz",
+        "'0 zero 0.2' is not numeric",
     ),
     "short-xyz": (_two_joints(xyz="0 0"), {}, "joint[j2]/origin@xyz", "valid: 3 numbers"),
     "xacro": (_two_joints(xyz="${l} 0 0"), {}, "joint[j2]/origin@xyz", "run xacro"),
     "missing-link": (
         _two_joints().replace('<child link="b"/>', '<child link="c"/>'),
-        {}, "joint[j2]/child@link", "'c' is not a <link>",
+        {},
+        "joint[j2]/child@link",
+        "'c' is not a <link>",
     ),
     "zero-axis": (
         _two_joints().replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
-        {}, "joint[j2]/axis@xyz", "zero length",
+        {},
+        "joint[j2]/axis@xyz",
+        "zero length",
     ),
     "no-movable-joint": (
         _two_joints(type="fixed").replace('type="revolute"', 'type="fixed"'),
-        {}, "tip_link", "no movable joint",
+        {},
+        "tip_link",
+        "no movable joint",
     ),
     "two-roots": (
         _two_joints().replace("</robot>", "<link name='island'/></robot>"),
-        {}, "base_link", "several root links",
+        {},
+        "base_link",
+        "several root links",
     ),
     "no-velocity": (_two_joints(limit='lower="-1" upper="1"'), {}, "joint[j2]/limit@velocity", "missing"),
     "inverted-limits": (
         _two_joints(limit='lower="1" upper="-1" velocity="1"'),
-        {}, "joint[j2]/limit", "lower 1.0 > upper -1.0",
+        {},
+        "joint[j2]/limit",
+        "lower 1.0 > upper -1.0",
     ),
     "non-numeric-limit": (
         _two_joints(limit='lower="-1" upper="one" velocity="1"'),
-        {}, "joint[j2]/limit@upper", "'one' is not numeric",
+        {},
+        "joint[j2]/limit@upper",
+        "'one' is not numeric",
     ),
 }
 
 
-@pytest.mark.parametrize(
-    ("text", "kwargs", "field", "words"), list(_ERROR_CASES.values()), ids=list(_ERROR_CASES)
-)
+@pytest.mark.parametrize(("text", "kwargs", "field", "words"), list(_ERROR_CASES.values()), ids=list(_ERROR_CASES))
 def test_errors_name_file_and_field(tmp_path, text, kwargs, field, words):
     path = tmp_path / "broken_arm.urdf"
     path.write_text(text)

@@ -24,7 +24,9 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_joint_argument(parser: argparse.ArgumentParser, flag: str = "--q", required: bool = False, help_text: str = "") -> None:
+def add_joint_argument(
+    parser: argparse.ArgumentParser, flag: str = "--q", required: bool = False, help_text: str = ""
+) -> None:
     """``--q v1 v2 …`` joint values in model order [rad | m]."""
     parser.add_argument(
         flag,
@@ -38,10 +40,20 @@ def add_joint_argument(parser: argparse.ArgumentParser, flag: str = "--q", requi
 
 def add_pose_arguments(parser: argparse.ArgumentParser, required: bool = True) -> None:
     """``--xyz x y z`` with ``--rpy roll pitch yaw`` or ``--quat x y z w``."""
-    parser.add_argument("--xyz", nargs=3, type=float, metavar=("X", "Y", "Z"), required=required, help="position in the base frame [m]")
+    parser.add_argument(
+        "--xyz", nargs=3, type=float, metavar=("X", "Y", "Z"), required=required, help="position in the base frame [m]"
+    )
     rotation = parser.add_mutually_exclusive_group()
-    rotation.add_argument("--rpy", nargs=3, type=float, metavar=("ROLL", "PITCH", "YAW"), help="orientation, R = Rz(yaw) Ry(pitch) Rx(roll) [rad]")
-    rotation.add_argument("--quat", nargs=4, type=float, metavar=("X", "Y", "Z", "W"), help="orientation as a quaternion (x y z w)")
+    rotation.add_argument(
+        "--rpy",
+        nargs=3,
+        type=float,
+        metavar=("ROLL", "PITCH", "YAW"),
+        help="orientation, R = Rz(yaw) Ry(pitch) Rx(roll) [rad]",
+    )
+    rotation.add_argument(
+        "--quat", nargs=4, type=float, metavar=("X", "Y", "Z", "W"), help="orientation as a quaternion (x y z w)"
+    )
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:

@@ -38,10 +38,22 @@ def register(subparsers) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--out", default="runs/demo.mcap", metavar="FILE", help="recording of the live run (default runs/demo.mcap)")
-    parser.add_argument("--rate", type=float, default=500.0, metavar="HZ", help="loop rate of the nodes [Hz] (default 500)")
-    parser.add_argument("--line-speed", type=float, default=0.2, metavar="M/S", help="top speed of the straight line [m/s] (default 0.2)")
-    parser.add_argument("--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)")
+    parser.add_argument(
+        "--out", default="runs/demo.mcap", metavar="FILE", help="recording of the live run (default runs/demo.mcap)"
+    )
+    parser.add_argument(
+        "--rate", type=float, default=500.0, metavar="HZ", help="loop rate of the nodes [Hz] (default 500)"
+    )
+    parser.add_argument(
+        "--line-speed",
+        type=float,
+        default=0.2,
+        metavar="M/S",
+        help="top speed of the straight line [m/s] (default 0.2)",
+    )
+    parser.add_argument(
+        "--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)"
+    )
     parser.add_argument("--timeout", type=float, default=60.0, metavar="S", help="limit for each live leg [s]")
     parser.set_defaults(run=run_demo)
 
@@ -78,16 +90,29 @@ def run_demo(args: argparse.Namespace) -> int:
 
     print(f"goal: {_pose_line(goal_pose)}; gains {GAIN} 1/s; dt 1 ms")
     started = time.perf_counter()
-    result = simulate(model, q0, goal_pose, ControllerConfig(gain_angular=GAIN, gain_linear=GAIN), dt=0.001, duration=20.0, tolerance=TOLERANCE)
+    result = simulate(
+        model,
+        q0,
+        goal_pose,
+        ControllerConfig(gain_angular=GAIN, gain_linear=GAIN),
+        dt=0.001,
+        duration=20.0,
+        tolerance=TOLERANCE,
+    )
     elapsed = time.perf_counter() - started
     prismatic = int(np.flatnonzero(model.is_prismatic)[0])
     lowest = float(result.q[:, prismatic].min())
-    ideal = math.log(max(np.linalg.norm(result.position_error[0]), np.linalg.norm(result.orientation_error[0])) / TOLERANCE) / GAIN
+    ideal = (
+        math.log(max(np.linalg.norm(result.position_error[0]), np.linalg.norm(result.orientation_error[0])) / TOLERANCE)
+        / GAIN
+    )
     print(
         f"converged: {result.converged} at t = {result.time_to_converge} s "
         f"(pure exponential convergence: {ideal:.2f} s); {result.steps} steps in {elapsed:.2f} s of computing"
     )
-    print(f"final error: position {result.final_position_error:.2e} m, orientation {result.final_orientation_error:.2e} rad")
+    print(
+        f"final error: position {result.final_position_error:.2e} m, orientation {result.final_orientation_error:.2e} rad"
+    )
     print(
         f"prismatic {model.joints[prismatic].name}: lowest {lowest:.6f} m (limit {model.lower[prismatic]:.3f} m); "
         f"largest limit violation {result.max_limit_violation:.1e}"
@@ -105,16 +130,28 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.exists():
         out.unlink()
-    _heading(f"3/4 live pipeline at {args.rate:g} Hz (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})")
-    controller = {"position_tolerance": TOLERANCE, "orientation_tolerance": TOLERANCE, "gain_linear": GAIN, "gain_angular": GAIN}
+    _heading(
+        f"3/4 live pipeline at {args.rate:g} Hz (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})"
+    )
+    controller = {
+        "position_tolerance": TOLERANCE,
+        "orientation_tolerance": TOLERANCE,
+        "gain_linear": GAIN,
+        "gain_angular": GAIN,
+    }
     generator = {"time_scaling": "trapezoidal", "max_linear_velocity": args.line_speed}
     recorder = NodeProcess("recorder", "recorder", {"output": str(out)})
-    processes = [recorder] + pipeline_processes("genova7", rate_hz=args.rate, controller=controller, generator=generator)
+    processes = [recorder] + pipeline_processes(
+        "genova7", rate_hz=args.rate, controller=controller, generator=generator
+    )
     exit_code = 0
     with Pipeline(processes) as pipeline:
         print(f"started {', '.join(pipeline.processes)} (logs in {pipeline.log_dir})", flush=True)
         client = pipeline.client()
-        legs = (("leg 1: pose goal", client.send_goal, goal_pose), ("leg 2: straight line back to the start tool pose", client.send_line, start_pose))
+        legs = (
+            ("leg 1: pose goal", client.send_goal, goal_pose),
+            ("leg 2: straight line back to the start tool pose", client.send_line, start_pose),
+        )
         for title, send, target in legs:
             print(f"{title}: {_pose_line(target)}", flush=True)
             started = time.perf_counter()
@@ -133,7 +170,9 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
                 if status is not None
                 else "no status"
             )
-            print(f"  {'converged' if converged else 'NOT converged'} in {took:.2f} s; final error {errors}", flush=True)
+            print(
+                f"  {'converged' if converged else 'NOT converged'} in {took:.2f} s; final error {errors}", flush=True
+            )
             exit_code = exit_code or (0 if converged else 1)
         tool_now = client.current_tool_pose()
         print(f"  tool now: {_pose_line(tool_now)}")

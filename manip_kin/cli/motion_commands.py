@@ -26,7 +26,9 @@ from manip_kin.model import RobotModel
 from manip_kin.simulation import simulate
 from manip_kin.tasks import COMPONENTS, default_task, parse_task
 
-_FRAME_HELP = "controlled frame: tool | ee | N (joint frame 1..n) | a link name; default: tool if the robot has one, else ee"
+_FRAME_HELP = (
+    "controlled frame: tool | ee | N (joint frame 1..n) | a link name; default: tool if the robot has one, else ee"
+)
 _TASK_HELP = (
     "pose components to achieve: full | position | position_yaw | orientation | a comma list of "
     f"{','.join(COMPONENTS)}; default: full with 6+ joints, else what the arm can do "
@@ -46,14 +48,24 @@ def register(subparsers) -> None:
     )
     add_robot_argument(ik)
     add_pose_arguments(ik)
-    add_joint_argument(ik, "--q0", help_text="initial guess in model joint order [rad | m] (default: the robot's start configuration)")
-    ik.add_argument("--seed", type=int, default=None, metavar="S", help="seed of the random restarts (default: unseeded)")
+    add_joint_argument(
+        ik, "--q0", help_text="initial guess in model joint order [rad | m] (default: the robot's start configuration)"
+    )
+    ik.add_argument(
+        "--seed", type=int, default=None, metavar="S", help="seed of the random restarts (default: unseeded)"
+    )
     ik.add_argument("--method", choices=IK_METHODS, default="lm", help="lm (default), nr (Newton-Raphson) or dls")
     ik.add_argument("--frame", default=None, help=_FRAME_HELP)
     ik.add_argument("--task", default=None, help=_TASK_HELP)
-    ik.add_argument("--tolerance-position", type=float, default=1e-6, metavar="M", help="success threshold [m] (default 1e-6)")
     ik.add_argument(
-        "--tolerance-orientation", type=float, default=1e-6, metavar="RAD", help="success threshold [rad] (default 1e-6)"
+        "--tolerance-position", type=float, default=1e-6, metavar="M", help="success threshold [m] (default 1e-6)"
+    )
+    ik.add_argument(
+        "--tolerance-orientation",
+        type=float,
+        default=1e-6,
+        metavar="RAD",
+        help="success threshold [rad] (default 1e-6)",
     )
     ik.add_argument("--max-iterations", type=int, default=60, metavar="N", help="iterations per attempt (default 60)")
     ik.add_argument("--step", type=float, default=1.0, metavar="A", help="step size in (0, 1] (default 1)")
@@ -65,8 +77,16 @@ def register(subparsers) -> None:
         help="lm: added damping λ̄; dls: λ; nr: σ_min below which it damps "
         f"(defaults {', '.join(f'{k} {v:g}' for k, v in DEFAULT_DAMPING.items())})",
     )
-    ik.add_argument("--restarts", type=int, default=100, metavar="N", help="random restarts after a failed attempt (default 100)")
-    ik.add_argument("--time-budget", type=float, default=0.5, metavar="S", help="wall-time limit over all attempts [s] (default 0.5)")
+    ik.add_argument(
+        "--restarts", type=int, default=100, metavar="N", help="random restarts after a failed attempt (default 100)"
+    )
+    ik.add_argument(
+        "--time-budget",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="wall-time limit over all attempts [s] (default 0.5)",
+    )
     add_json_argument(ik)
     ik.set_defaults(run=run_ik)
 
@@ -78,13 +98,23 @@ def register(subparsers) -> None:
         epilog=_EXIT_CODES,
     )
     add_robot_argument(sim)
-    add_joint_argument(sim, "--q0", help_text="start configuration in model joint order [rad | m] (default: the robot's start configuration)")
+    add_joint_argument(
+        sim,
+        "--q0",
+        help_text="start configuration in model joint order [rad | m] (default: the robot's start configuration)",
+    )
     add_pose_arguments(sim)
     sim.add_argument("--gain-linear", type=float, default=0.8, metavar="K", help="position gain [1/s] (default 0.8)")
-    sim.add_argument("--gain-angular", type=float, default=0.8, metavar="K", help="orientation gain [1/s] (default 0.8)")
-    sim.add_argument("--dt", type=float, default=0.001, metavar="S", help="control period and integration step [s] (default 0.001)")
+    sim.add_argument(
+        "--gain-angular", type=float, default=0.8, metavar="K", help="orientation gain [1/s] (default 0.8)"
+    )
+    sim.add_argument(
+        "--dt", type=float, default=0.001, metavar="S", help="control period and integration step [s] (default 0.001)"
+    )
     sim.add_argument("--duration", type=float, default=20.0, metavar="S", help="simulated time limit [s] (default 20)")
-    sim.add_argument("--tolerance", type=float, default=1e-6, metavar="E", help="convergence threshold [m] and [rad] (default 1e-6)")
+    sim.add_argument(
+        "--tolerance", type=float, default=1e-6, metavar="E", help="convergence threshold [m] and [rad] (default 1e-6)"
+    )
     sim.add_argument("--frame", default=None, help=_FRAME_HELP)
     sim.add_argument("--task", default=None, help=_TASK_HELP)
     sim.add_argument(
@@ -185,7 +215,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         respect_position_limits=not args.ignore_position_limits,
     )
     # Samples are not printed; one in a hundred keeps memory small on long runs.
-    result = simulate(model, q0, goal, config, dt=args.dt, duration=args.duration, tolerance=args.tolerance, record_every=100)
+    result = simulate(
+        model, q0, goal, config, dt=args.dt, duration=args.duration, tolerance=args.tolerance, record_every=100
+    )
     hit_limits = sorted({model.joints[j].name for j in range(model.dof) if result.limited[:, j].any()})
     if args.json:
         print_json(
@@ -204,7 +236,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         )
     else:
         if result.converged:
-            print(f"{model.name}: converged in {result.time_to_converge:.3f} s of simulated time ({result.steps} steps of {args.dt:g} s)")
+            print(
+                f"{model.name}: converged in {result.time_to_converge:.3f} s of simulated time ({result.steps} steps of {args.dt:g} s)"
+            )
         else:
             print(f"{model.name}: did NOT converge in {args.duration:g} s ({result.steps} steps of {args.dt:g} s)")
             print(f"  reason: {result.reason}")

@@ -17,7 +17,9 @@ def register(subparsers) -> None:
         description="Figures: " + ", ".join(FIGURES) + ". Times are seconds since the first message.",
     )
     parser.add_argument("file", metavar="FILE", help="a recording: .mcap file or rosbag2 bag directory")
-    parser.add_argument("--out", metavar="DIR", default=None, help="output directory (default: next to FILE, <name>_plots)")
+    parser.add_argument(
+        "--out", metavar="DIR", default=None, help="output directory (default: next to FILE, <name>_plots)"
+    )
     parser.add_argument("--title", default="", help="prefix for the figure titles")
     parser.set_defaults(run=run_plot)
 

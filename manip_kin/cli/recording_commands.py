@@ -38,9 +38,13 @@ def register(subparsers) -> None:
         ),
     )
     replay.add_argument("file", metavar="FILE", help="a .mcap file or a bag directory")
-    replay.add_argument("--rate", type=float, default=1.0, metavar="R", help="speed factor, > 0 (default 1; 2 = twice as fast)")
+    replay.add_argument(
+        "--rate", type=float, default=1.0, metavar="R", help="speed factor, > 0 (default 1; 2 = twice as fast)"
+    )
     replay.add_argument("--loop", action="store_true", help="start over at the end until interrupted")
-    replay.add_argument("--topics", nargs="+", metavar="TOPIC", default=None, help="only these recorded topics (default all)")
+    replay.add_argument(
+        "--topics", nargs="+", metavar="TOPIC", default=None, help="only these recorded topics (default all)"
+    )
     replay.add_argument(
         "--remap",
         nargs="+",
@@ -49,8 +53,14 @@ def register(subparsers) -> None:
         metavar="FROM:=TO",
         help="publish recorded topic FROM on TO (repeatable)",
     )
-    replay.add_argument("--start-offset", type=float, default=0.0, metavar="S", help="skip the first S seconds of the recording")
-    replay.add_argument("--clock", action="store_true", help="publish the recording's time on /clock (rosgraph_msgs/Clock) for use_sim_time nodes")
+    replay.add_argument(
+        "--start-offset", type=float, default=0.0, metavar="S", help="skip the first S seconds of the recording"
+    )
+    replay.add_argument(
+        "--clock",
+        action="store_true",
+        help="publish the recording's time on /clock (rosgraph_msgs/Clock) for use_sim_time nodes",
+    )
     replay.add_argument(
         "--wait-for-subscribers",
         type=float,

@@ -45,9 +45,21 @@ def register(subparsers) -> None:
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
     add_pose_arguments(parser)
-    parser.add_argument("--frame", default="base_link", help="frame_id of the pose: the base frame of the robot (default base_link)")
-    parser.add_argument("--wait", action="store_true", help="block until the controller reports converged (or --timeout), print the final error")
-    parser.add_argument("--timeout", type=float, default=30.0, metavar="S", help="seconds to wait for a subscriber, and for convergence with --wait (default 30)")
+    parser.add_argument(
+        "--frame", default="base_link", help="frame_id of the pose: the base frame of the robot (default base_link)"
+    )
+    parser.add_argument(
+        "--wait",
+        action="store_true",
+        help="block until the controller reports converged (or --timeout), print the final error",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="seconds to wait for a subscriber, and for convergence with --wait (default 30)",
+    )
     add_json_argument(parser)
 
 
@@ -105,13 +117,19 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     return start, stamp, payload
 
 
-def _await_convergence(args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, suffix: str = "") -> int:
+def _await_convergence(
+    args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, suffix: str = ""
+) -> int:
     """Wait for the controller to report ``goal_stamp`` converged; report; 0 or 1."""
     converged, status = client.wait_converged(goal_stamp, timeout)
     elapsed = time.monotonic() - start
     errors = _errors(status)
     payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
-    verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
+    verdict = (
+        f"converged in {elapsed:.2f} s"
+        if converged
+        else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
+    )
     _report(args, payload, f"{label} {verdict}{suffix}: {_format_errors(errors)}")
     return 0 if converged else 1
 
@@ -136,7 +154,12 @@ def run_line(args: argparse.Namespace) -> int:
     _check_timeout(args)
     with PipelineClient(watch_state=False, base_frame=args.frame) as client:
         delivered = _deliver(
-            args, client, client.send_line, "/line_target", "line target", ("trajectory_generator", "cartesian_controller")
+            args,
+            client,
+            client.send_line,
+            "/line_target",
+            "line target",
+            ("trajectory_generator", "cartesian_controller"),
         )
         if isinstance(delivered, int):
             return delivered
@@ -147,11 +170,19 @@ def run_line(args: argparse.Namespace) -> int:
             print(f"manip_kin line: error: {error}", file=sys.stderr)
             return 1
         if generator.values.get("rejected_stamp") == stamp:
-            print(f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr)
+            print(
+                f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr
+            )
             return 2
         payload["line_duration"] = generator.number("duration")
         remaining = max(args.timeout - (time.monotonic() - start), 0.1)
         return _await_convergence(
-            args, client, generator.values["final_goal_stamp"], start, payload, "line", remaining,
+            args,
+            client,
+            generator.values["final_goal_stamp"],
+            start,
+            payload,
+            "line",
+            remaining,
             suffix=f" (line {payload['line_duration']:.2f} s)",
         )

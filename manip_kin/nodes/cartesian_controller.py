@@ -35,21 +35,65 @@ PARAMETERS = (
     ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
     ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0),
     ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0),
-    ParamSpec("frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"),
-    ParamSpec("task", "str", "", "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)"),
+    ParamSpec(
+        "frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"
+    ),
+    ParamSpec(
+        "task",
+        "str",
+        "",
+        "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)",
+    ),
     ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0),
     ParamSpec("singular_threshold", "float", 0.02, "smallest singular value below which damping rises", positive=True),
     ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits"),
     ParamSpec("respect_position_limits", "bool", True, "redistribute the task over joints not at a position limit"),
     ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
-    ParamSpec("joint_state_timeout", "float", 0.1, "no joint state for longer than this: publish zeros", "s", positive=True),
-    ParamSpec("goal_timeout", "float", 0.0, "a goal older than this is dropped and zeros published (0 = goals never expire)", "s", minimum=0.0),
-    ParamSpec("goal_twist_timeout", "float", 0.02, "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)", "s", positive=True),
-    ParamSpec("position_tolerance", "float", 1e-4, "converged when the position error is below this", "m", positive=True),
+    ParamSpec(
+        "joint_state_timeout", "float", 0.1, "no joint state for longer than this: publish zeros", "s", positive=True
+    ),
+    ParamSpec(
+        "goal_timeout",
+        "float",
+        0.0,
+        "a goal older than this is dropped and zeros published (0 = goals never expire)",
+        "s",
+        minimum=0.0,
+    ),
+    ParamSpec(
+        "goal_twist_timeout",
+        "float",
+        0.02,
+        "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)",
+        "s",
+        positive=True,
+    ),
+    ParamSpec(
+        "position_tolerance", "float", 1e-4, "converged when the position error is below this", "m", positive=True
+    ),
     ParamSpec("orientation_tolerance", "float", 1e-3, "... and the orientation error below this", "rad", positive=True),
-    ParamSpec("quaternion_tolerance", "float", 1e-2, "a goal quaternion whose length differs from 1 by more is rejected", positive=True),
-    ParamSpec("diagnostics_rate_hz", "float", 10.0, "rate of /diagnostics (also sent at once on a state change)", "Hz", positive=True),
-    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+    ParamSpec(
+        "quaternion_tolerance",
+        "float",
+        1e-2,
+        "a goal quaternion whose length differs from 1 by more is rejected",
+        positive=True,
+    ),
+    ParamSpec(
+        "diagnostics_rate_hz",
+        "float",
+        10.0,
+        "rate of /diagnostics (also sent at once on a state change)",
+        "Hz",
+        positive=True,
+    ),
+    ParamSpec(
+        "realtime_priority",
+        "int",
+        0,
+        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+        minimum=0,
+    ),
 )
 
 USAGE = usage_text(
@@ -68,7 +112,11 @@ USAGE = usage_text(
     ],
     publishes=[
         ("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
-        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, errors [m, rad], manipulability, damping, limits, loop timing"),
+        (
+            "/diagnostics",
+            "diagnostic_msgs/DiagnosticArray",
+            "state, errors [m, rad], manipulability, damping, limits, loop timing",
+        ),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000 -p gain_linear:=1.5",
 )
@@ -151,7 +199,9 @@ class CartesianControllerNode(LoopingNode):
             problem = conv.pose_problem(msg, self.base_frame, "goal pose", self._quaternion_tolerance)
             if problem is not None:
                 self.rejected_goals += 1
-                self._warn("goal:" + conv.problem_kind(problem), f"rejected /goal_pose: {problem}; keeping the previous goal")
+                self._warn(
+                    "goal:" + conv.problem_kind(problem), f"rejected /goal_pose: {problem}; keeping the previous goal"
+                )
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
             self.goal_stamp = conv.stamp_key(msg.header.stamp)
@@ -160,7 +210,9 @@ class CartesianControllerNode(LoopingNode):
             problem = conv.twist_problem(msg, self.base_frame, "goal twist")
             if problem is not None:
                 self.rejected_twists += 1
-                self._warn("twist:" + conv.problem_kind(problem), f"rejected /goal_twist: {problem}; feed-forward not used")
+                self._warn(
+                    "twist:" + conv.problem_kind(problem), f"rejected /goal_twist: {problem}; feed-forward not used"
+                )
                 continue
             angular, linear = conv.twist_to_arrays(msg.twist)
             self._twist = (angular, linear)
@@ -203,7 +255,11 @@ class CartesianControllerNode(LoopingNode):
     def _classify(self, output: ControlOutput, goal_moving: bool) -> tuple[str, str]:
         position_error = output.position_error_norm
         orientation_error = output.orientation_error_norm
-        if not goal_moving and position_error <= self.position_tolerance and orientation_error <= self.orientation_tolerance:
+        if (
+            not goal_moving
+            and position_error <= self.position_tolerance
+            and orientation_error <= self.orientation_tolerance
+        ):
             return "converged", "goal reached within tolerance"
         if output.singular:
             return "singular", f"manipulability {output.manipulability:.3g}, damping {output.damping:.3g}"
@@ -244,4 +300,3 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-

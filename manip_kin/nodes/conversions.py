@@ -179,7 +179,12 @@ def make_joint_state(names: Sequence[str], position, velocity=None, stamp: Time 
     """A ``JointState`` with names, positions [rad | m] and velocities [rad/s | m/s] (model order)."""
     msg = JointState()
     msg.name = list(names)
-    fill_joint_state(msg, np.asarray(position, dtype=float), None if velocity is None else np.asarray(velocity, float), stamp or Time())
+    fill_joint_state(
+        msg,
+        np.asarray(position, dtype=float),
+        None if velocity is None else np.asarray(velocity, float),
+        stamp or Time(),
+    )
     return msg
 
 
@@ -231,7 +236,11 @@ class JointStateMapper:
             self._rebuild(list(names))
         if self._problem is not None:
             raise InvalidMessageError(self._problem)
-        position = np.frombuffer(msg.position, dtype=np.float64) if isinstance(msg.position, array.array) else np.asarray(msg.position, dtype=float)
+        position = (
+            np.frombuffer(msg.position, dtype=np.float64)
+            if isinstance(msg.position, array.array)
+            else np.asarray(msg.position, dtype=float)
+        )
         if position.shape[0] != len(names):
             raise InvalidMessageError(
                 f"joint state has {len(names)} names but {position.shape[0]} positions; valid: one position per name"
@@ -515,8 +524,17 @@ class JointStateCdr:
         sec, nanosec = _stamp_parts(stamp_ns)
         n = self._count
         return self._struct.pack(
-            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names,
-            n, *position.tolist(), n, *velocity.tolist(), 0,
+            _CDR_LE,
+            sec,
+            nanosec,
+            self._frame_length,
+            self._frame,
+            *self._names,
+            n,
+            *position.tolist(),
+            n,
+            *velocity.tolist(),
+            0,
         )
 
     def encode_values(self, stamp_ns: int, position, velocity) -> bytes:

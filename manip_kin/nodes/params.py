@@ -111,9 +111,7 @@ class ParamSpec:
                 if not isinstance(value, str):
                     raise TypeError
                 if self.choices and value not in self.choices:
-                    raise InvalidArgumentError(
-                        f"parameter {self.name} = {value!r}; valid: {', '.join(self.choices)}"
-                    )
+                    raise InvalidArgumentError(f"parameter {self.name} = {value!r}; valid: {', '.join(self.choices)}")
                 return value
             if self.kind == "float_list":
                 if isinstance(value, (str, bytes)) or any(isinstance(v, bool) for v in value):
@@ -136,7 +134,9 @@ class ParamSpec:
         if self.positive and not value > 0:
             raise InvalidArgumentError(f"parameter {self.name} = {value:g}; valid: > 0 {self.unit}".rstrip())
         if self.minimum is not None and value < self.minimum:
-            raise InvalidArgumentError(f"parameter {self.name} = {value:g}; valid: >= {self.minimum:g} {self.unit}".rstrip())
+            raise InvalidArgumentError(
+                f"parameter {self.name} = {value:g}; valid: >= {self.minimum:g} {self.unit}".rstrip()
+            )
 
     def _kind_text(self) -> str:
         return {
@@ -187,7 +187,11 @@ def usage_text(
         example: example command line(s).
     """
     lines = [f"usage: {executable} [--help] [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r FROM:=TO ...]", ""]
-    lines += [summary.strip(), "", "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters):"]
+    lines += [
+        summary.strip(),
+        "",
+        "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters):",
+    ]
     lines += [spec.help_line() for spec in specs]
     lines += ["", "Subscribes:"]
     lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in subscribes]

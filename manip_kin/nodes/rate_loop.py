@@ -240,7 +240,9 @@ class LoopingNode(Node):
 
     def start_loop(self, rate_hz: float, cycle: Callable[[int], None], realtime_priority: int = 0) -> None:
         """Start ``cycle(now_ns)`` at ``rate_hz`` [Hz] in the loop thread."""
-        self.loop = RateLoop(rate_hz, cycle, self._on_loop_error, name=self.get_name(), realtime_priority=realtime_priority)
+        self.loop = RateLoop(
+            rate_hz, cycle, self._on_loop_error, name=self.get_name(), realtime_priority=realtime_priority
+        )
         if self.loop.realtime_priority:
             self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
         self.loop.start()

@@ -68,13 +68,13 @@ LOST_CHECK_PERIOD_S = 0.5
 # chunk is compressed: about 2 s of the 1 kHz joint states.
 SUBSCRIPTION_DEPTH = 2000
 
-USAGE = """usage: recorder [--ros-args -p NAME:=VALUE ...]
+USAGE = f"""usage: recorder [--ros-args -p NAME:=VALUE ...]
 
 Record topics to a rosbag2-compatible MCAP file (ros2 bag, Foxglove, rosbags read it).
 
 parameters:
   topics        string[]  topics to record (default: every manip_kin topic:
-                          %s)
+                          {" ".join(DEFAULT_TOPICS)})
   all_topics    bool      record every topic discovered instead (hidden ones excluded; default false)
   output        string    FILE.mcap for a single file, or a bag directory path
                           (default runs/recording_YYYYmmdd_HHMMSS.mcap)
@@ -83,7 +83,7 @@ parameters:
   max_messages  int       stop after this many messages; 0 = unlimited (default 0)
 
 Ctrl-C or SIGTERM finish the file; a SIGKILL loses at most about the last second,
-and `manip_kin info --salvage OUT FILE` recovers the rest.""" % " ".join(DEFAULT_TOPICS)
+and `manip_kin info --salvage OUT FILE` recovers the rest."""
 
 
 def _descriptor(description: str, parameter_type: int) -> ParameterDescriptor:
@@ -137,13 +137,19 @@ class RecorderNode(Node):
                 "all_topics", False, _descriptor("record every discovered topic", ParameterType.PARAMETER_BOOL)
             ).value
         )
-        output = str(
-            self.declare_parameter(
-                "output",
-                "",
-                _descriptor("FILE.mcap or bag directory; empty: timestamped file under runs/", ParameterType.PARAMETER_STRING),
-            ).value
-        ) or default_output()
+        output = (
+            str(
+                self.declare_parameter(
+                    "output",
+                    "",
+                    _descriptor(
+                        "FILE.mcap or bag directory; empty: timestamped file under runs/",
+                        ParameterType.PARAMETER_STRING,
+                    ),
+                ).value
+            )
+            or default_output()
+        )
         compression = str(
             self.declare_parameter(
                 "compression", "zstd", _descriptor("zstd | lz4 | none", ParameterType.PARAMETER_STRING)
@@ -151,12 +157,16 @@ class RecorderNode(Node):
         )
         self._duration_s = float(
             self.declare_parameter(
-                "duration", 0.0, _descriptor("stop after this many seconds; 0 = unlimited", ParameterType.PARAMETER_DOUBLE)
+                "duration",
+                0.0,
+                _descriptor("stop after this many seconds; 0 = unlimited", ParameterType.PARAMETER_DOUBLE),
             ).value
         )
         self._max_messages = int(
             self.declare_parameter(
-                "max_messages", 0, _descriptor("stop after this many messages; 0 = unlimited", ParameterType.PARAMETER_INTEGER)
+                "max_messages",
+                0,
+                _descriptor("stop after this many messages; 0 = unlimited", ParameterType.PARAMETER_INTEGER),
             ).value
         )
         if compression not in COMPRESSION_CHOICES:
@@ -261,8 +271,13 @@ class RecorderNode(Node):
         except _rclpy.UnsupportedEventTypeError:
             lost_event = None
         entry = _RawTopic(
-            topic, type_name, message_type, handle, lost_event,
-            single_publisher=len(publishers) <= 1, presubscribed=not publishers,
+            topic,
+            type_name,
+            message_type,
+            handle,
+            lost_event,
+            single_publisher=len(publishers) <= 1,
+            presubscribed=not publishers,
         )
         with self._lock:
             self._topics[topic] = entry
@@ -360,9 +375,7 @@ class RecorderNode(Node):
             received = info.get("received_timestamp") or time.time_ns()
             if not self._writer.has_topic(entry.name):
                 self._add_channel(entry.name, entry.type_name, self.get_publishers_info_by_topic(entry.name))
-            self._writer.write_raw(
-                entry.name, data, received, source_time_ns=info.get("source_timestamp") or None
-            )
+            self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
             count = self._writer.message_count
         entry.received += 1
         sequence = info.get("publication_sequence_number")

@@ -41,9 +41,23 @@ PARAMETERS = (
     ),
     ParamSpec("rate_hz", "float", 500.0, "integration and publishing rate", "Hz", positive=True),
     ParamSpec("command_timeout", "float", 0.1, "a command older than this counts as zero velocity", "s", positive=True),
-    ParamSpec("base_frame", "str", None, "frame id of the published poses and twists", default_text="the robot's base frame (base_link)"),
-    ParamSpec("diagnostics_rate_hz", "float", 2.0, "rate of the loop statistics on /diagnostics (0: off)", "Hz", minimum=0.0),
-    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+    ParamSpec(
+        "base_frame",
+        "str",
+        None,
+        "frame id of the published poses and twists",
+        default_text="the robot's base frame (base_link)",
+    ),
+    ParamSpec(
+        "diagnostics_rate_hz", "float", 2.0, "rate of the loop statistics on /diagnostics (0: off)", "Hz", minimum=0.0
+    ),
+    ParamSpec(
+        "realtime_priority",
+        "int",
+        0,
+        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+        minimum=0,
+    ),
 )
 
 USAGE = usage_text(
@@ -54,7 +68,9 @@ USAGE = usage_text(
     "twists every cycle. A command older than command_timeout counts as zero; a command with the\n"
     "wrong length or a non-finite value is rejected with a log line.",
     PARAMETERS,
-    subscribes=[("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")],
+    subscribes=[
+        ("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")
+    ],
     publishes=[
         ("/joint_states", "sensor_msgs/JointState", "name, position, velocity, stamped"),
         ("/ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
@@ -211,7 +227,9 @@ class RobotStateNode(LoopingNode):
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
         self.command_timeout_ns = int(params["command_timeout"] * 1e9)
-        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"]) if params["diagnostics_rate_hz"] > 0 else 0
+        self._diagnostics_period_ns = (
+            int(1e9 / params["diagnostics_rate_hz"]) if params["diagnostics_rate_hz"] > 0 else 0
+        )
 
         self._command_sub = PolledSubscription(self, Float64MultiArray, "/joint_velocity_commands", 10)
         self._joint_state_pub = self.create_publisher(JointState, "/joint_states", 10)
@@ -220,7 +238,9 @@ class RobotStateNode(LoopingNode):
         self._ee_twist_pub = self.create_publisher(TwistStamped, "/ee_twist", 10)
         self._tool_twist_pub = self.create_publisher(TwistStamped, "/tool_twist", 10)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        latched = QoSProfile(
+            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+        )
         self._description_pub = self.create_publisher(String, "/robot_description", latched)
 
         # Messages go out pre-serialised (see conversions.PoseStampedCdr): half the publish cost.
@@ -258,7 +278,10 @@ class RobotStateNode(LoopingNode):
             problem = conv.command_problem(values, dof)
             if problem is not None:
                 self.rejected_commands += 1
-                self._warn(conv.problem_kind(problem), f"rejected /joint_velocity_commands: {problem}; keeping the previous command")
+                self._warn(
+                    conv.problem_kind(problem),
+                    f"rejected /joint_velocity_commands: {problem}; keeping the previous command",
+                )
                 continue
             self._command = values
             self._command_time_ns = now_ns
@@ -277,7 +300,9 @@ class RobotStateNode(LoopingNode):
 
         # System time is ROS time unless use_sim_time (checked once at start).
         stamp_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
-        self._joint_state_pub.publish(self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, integrator.qdot_values))
+        self._joint_state_pub.publish(
+            self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, integrator.qdot_values)
+        )
         self._ee_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.ee_values))
         self._tool_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.tool_values))
         self._ee_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.ee_twist_values))

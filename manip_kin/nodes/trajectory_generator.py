@@ -39,17 +39,61 @@ PARAMETERS = (
     ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file (for the reach check)"),
     ParamSpec("rate_hz", "float", 500.0, "rate of /goal_pose and /goal_twist while a line runs", "Hz", positive=True),
     ParamSpec("time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS),
-    ParamSpec("max_linear_velocity", "float", 0.25, "speed limit of the position (the constant speed of 'constant')", "m/s", positive=True),
-    ParamSpec("max_linear_acceleration", "float", 0.5, "acceleration limit of the position (not used by 'constant')", "m/s^2", positive=True),
+    ParamSpec(
+        "max_linear_velocity",
+        "float",
+        0.25,
+        "speed limit of the position (the constant speed of 'constant')",
+        "m/s",
+        positive=True,
+    ),
+    ParamSpec(
+        "max_linear_acceleration",
+        "float",
+        0.5,
+        "acceleration limit of the position (not used by 'constant')",
+        "m/s^2",
+        positive=True,
+    ),
     ParamSpec("max_angular_velocity", "float", 0.5, "angular speed limit of the orientation", "rad/s", positive=True),
-    ParamSpec("max_angular_acceleration", "float", 1.0, "angular acceleration limit (not used by 'constant')", "rad/s^2", positive=True),
+    ParamSpec(
+        "max_angular_acceleration",
+        "float",
+        1.0,
+        "angular acceleration limit (not used by 'constant')",
+        "rad/s^2",
+        positive=True,
+    ),
     ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits"),
-    ParamSpec("base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"),
-    ParamSpec("tool_pose_timeout", "float", 0.5, "a target is rejected when /tool_pose is older than this", "s", positive=True),
-    ParamSpec("quaternion_tolerance", "float", 1e-2, "a target quaternion whose length differs from 1 by more is rejected", positive=True),
+    ParamSpec(
+        "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
+    ),
+    ParamSpec(
+        "tool_pose_timeout", "float", 0.5, "a target is rejected when /tool_pose is older than this", "s", positive=True
+    ),
+    ParamSpec(
+        "quaternion_tolerance",
+        "float",
+        1e-2,
+        "a target quaternion whose length differs from 1 by more is rejected",
+        positive=True,
+    ),
     ParamSpec("path_points", "int", 50, "poses in /planned_path", positive=True),
-    ParamSpec("diagnostics_rate_hz", "float", 5.0, "rate of /diagnostics (also sent at once on a state change)", "Hz", positive=True),
-    ParamSpec("realtime_priority", "int", 0, "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)", minimum=0),
+    ParamSpec(
+        "diagnostics_rate_hz",
+        "float",
+        5.0,
+        "rate of /diagnostics (also sent at once on a state change)",
+        "Hz",
+        positive=True,
+    ),
+    ParamSpec(
+        "realtime_priority",
+        "int",
+        0,
+        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+        minimum=0,
+    ),
 )
 
 USAGE = usage_text(
@@ -105,7 +149,9 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 1)
         self._goal_pub = self.create_publisher(PoseStamped, "/goal_pose", 10)
         self._twist_pub = self.create_publisher(TwistStamped, "/goal_twist", 10)
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        latched = QoSProfile(
+            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
+        )
         self._path_pub = self.create_publisher(Path, "/planned_path", latched)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._goal_cdr = conv.PoseStampedCdr(self.base_frame)
@@ -166,7 +212,10 @@ class TrajectoryGeneratorNode(LoopingNode):
         while (msg := self._joint_state_sub.take()) is not None:
             self._joint_state_msg = msg
         clock_ns = self.get_clock().now().nanoseconds
-        if self._tool_pose_msg is None or clock_ns - conv.stamp_to_ns(self._tool_pose_msg.header.stamp) > self._tool_pose_timeout_ns:
+        if (
+            self._tool_pose_msg is None
+            or clock_ns - conv.stamp_to_ns(self._tool_pose_msg.header.stamp) > self._tool_pose_timeout_ns
+        ):
             self._reject(target_msg, "no current /tool_pose (is robot_state running?)")
             return False
         tool_problem = conv.pose_problem(self._tool_pose_msg, self.base_frame, "tool pose", self._quaternion_tolerance)
@@ -194,7 +243,10 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._line_start_ns = now_ns
         self.target_stamp = conv.stamp_key(target_msg.header.stamp)
         self.final_goal_stamp = ""
-        self.state, self.detail = "streaming", f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
+        self.state, self.detail = (
+            "streaming",
+            f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s",
+        )
         self.get_logger().info(
             f"{'pre-empted the running line; ' if preempted else ''}streaming a {self.time_scaling} line "
             f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {self.detail}"
@@ -207,7 +259,9 @@ class TrajectoryGeneratorNode(LoopingNode):
         stamp = self.get_clock().now().to_msg()
         path.header.stamp = stamp
         path.header.frame_id = self.base_frame
-        path.poses = [conv.make_pose_stamped(pose, self.base_frame, stamp) for pose in line.sample_path(self._path_points)]
+        path.poses = [
+            conv.make_pose_stamped(pose, self.base_frame, stamp) for pose in line.sample_path(self._path_points)
+        ]
         self._path_pub.publish(path)
 
     # --- the cycle -------------------------------------------------------------------------------

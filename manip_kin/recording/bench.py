@@ -199,14 +199,33 @@ def benchmark_recorder(rate_hz: float = 1000.0, duration_s: float = 8.0, n_topic
         output = Path(directory) / "load.mcap"
         topics = ",".join(topic for topic, _ in LOAD_TOPICS[:n_topics])
         recorder = subprocess.Popen(
-            [sys.executable, "-m", "manip_kin.nodes.recorder", "--ros-args",
-             "-p", f"output:={output}", "-p", f"topics:=[{topics}]"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            [
+                sys.executable,
+                "-m",
+                "manip_kin.nodes.recorder",
+                "--ros-args",
+                "-p",
+                f"output:={output}",
+                "-p",
+                f"topics:=[{topics}]",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         load = subprocess.Popen(
-            [sys.executable, "-m", "manip_kin.recording.bench", "publish",
-             str(rate_hz), str(duration_s), str(n_topics), str(depth)],
-            stdout=subprocess.PIPE, text=True,
+            [
+                sys.executable,
+                "-m",
+                "manip_kin.recording.bench",
+                "publish",
+                str(rate_hz),
+                str(duration_s),
+                str(n_topics),
+                str(depth),
+            ],
+            stdout=subprocess.PIPE,
+            text=True,
         )
         try:
             # Discovery and matching first; then measure a window inside the publishing time.

@@ -23,10 +23,19 @@ from manip_kin.recording.msgdef import ArrayKind, Definitions, FieldSpec, normal
 ENCAPSULATION_SIZE = 4
 
 _PRIMITIVE_SIZES = {
-    "bool": 1, "byte": 1, "char": 1, "int8": 1, "uint8": 1,
-    "int16": 2, "uint16": 2,
-    "int32": 4, "uint32": 4, "float32": 4,
-    "int64": 8, "uint64": 8, "float64": 8,
+    "bool": 1,
+    "byte": 1,
+    "char": 1,
+    "int8": 1,
+    "uint8": 1,
+    "int16": 2,
+    "uint16": 2,
+    "int32": 4,
+    "uint32": 4,
+    "float32": 4,
+    "int64": 8,
+    "uint64": 8,
+    "float64": 8,
 }
 
 # (buffer, position after the encapsulation header, little_endian) -> position after the value

@@ -32,8 +32,20 @@ SEPARATOR_LINE = "=" * 80
 # The primitive names rosbag2 skips when it looks for dependencies.
 PRIMITIVE_TYPES = frozenset(
     {
-        "bool", "byte", "char", "float32", "float64", "int8", "uint8",
-        "int16", "uint16", "int32", "uint32", "int64", "uint64", "string",
+        "bool",
+        "byte",
+        "char",
+        "float32",
+        "float64",
+        "int8",
+        "uint8",
+        "int16",
+        "uint16",
+        "int32",
+        "uint32",
+        "int64",
+        "uint64",
+        "string",
     }
 )
 # ``wstring`` is primitive too, but rosbag2's list omits it; it only matters for parsing.
@@ -59,9 +71,7 @@ def normalize_type_name(type_name: str) -> str:
     """
     match = _TYPE_NAME_PATTERN.match(type_name)
     if not match:
-        raise MessageDefinitionError(
-            f"message type {type_name!r} is not of the form 'pkg/msg/Type' or 'pkg/Type'"
-        )
+        raise MessageDefinitionError(f"message type {type_name!r} is not of the form 'pkg/msg/Type' or 'pkg/Type'")
     return f"{match.group(1)}/msg/{match.group(2)}"
 
 
@@ -101,7 +111,7 @@ def find_interface_file(type_name: str, suffix: str = ".msg") -> Path:
     )
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def read_msg_text(type_name: str) -> str:
     """The installed ``.msg`` text of a type, exactly as on disk."""
     return find_interface_file(type_name, ".msg").read_text(encoding="utf-8")
@@ -169,10 +179,9 @@ def split_definition_text(root_type: str, schema_text: str) -> dict[str, str]:
             header = lines[index + 1].strip() if index + 1 < len(lines) else ""
             if not header.startswith("MSG:"):
                 raise MessageDefinitionError(
-                    f"schema of {root_type!r}: expected 'MSG: pkg/Type' after the separator, "
-                    f"got {header!r}"
+                    f"schema of {root_type!r}: expected 'MSG: pkg/Type' after the separator, got {header!r}"
                 )
-            current_name = normalize_type_name(header[len("MSG:"):].strip())
+            current_name = normalize_type_name(header[len("MSG:") :].strip())
             current_lines = []
             index += 2
             continue
@@ -298,7 +307,7 @@ def definitions_from_schema(root_type: str, schema_text: str) -> dict[str, tuple
     return definitions
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def local_definitions(type_name: str) -> Mapping[str, tuple[FieldSpec, ...]]:
     """``{pkg/msg/Type: fields}`` of a type and everything it uses, from installed files."""
     root = normalize_type_name(type_name)
@@ -318,9 +327,21 @@ def has_header_first(type_name: str, definitions: Definitions) -> bool:
 # .msg primitive → FieldType id (via the IDL type rosidl_adapter maps it to: char → uint8,
 # byte → octet, float64 → double, ...). Ids from type_description_interfaces/msg/FieldType.msg.
 _FIELD_TYPE_IDS = {
-    "int8": 2, "uint8": 3, "int16": 4, "uint16": 5, "int32": 6, "uint32": 7,
-    "int64": 8, "uint64": 9, "float32": 10, "float64": 11, "char": 3, "bool": 15, "byte": 16,
-    "string": 17, "wstring": 18,
+    "int8": 2,
+    "uint8": 3,
+    "int16": 4,
+    "uint16": 5,
+    "int32": 6,
+    "uint32": 7,
+    "int64": 8,
+    "uint64": 9,
+    "float32": 10,
+    "float64": 11,
+    "char": 3,
+    "bool": 15,
+    "byte": 16,
+    "string": 17,
+    "wstring": 18,
 }
 _NESTED_TYPE_ID = 1
 _BOUNDED_STRING_IDS = {"string": 21, "wstring": 22}
@@ -355,9 +376,7 @@ def type_description(type_name: str, definitions: Definitions) -> dict:
 
     def individual(name: str) -> dict:
         if name not in definitions:
-            raise MessageDefinitionError(
-                f"definition of {root!r} uses {name!r}, which the schema does not contain"
-            )
+            raise MessageDefinitionError(f"definition of {root!r} uses {name!r}, which the schema does not contain")
         return {"type_name": name, "fields": [_field_description(f) for f in definitions[name]]}
 
     referenced: set[str] = set()
@@ -391,7 +410,7 @@ def rihs01_from_schema(type_name: str, schema_text: str) -> str:
     return rihs01_hash(type_name, definitions_from_schema(type_name, schema_text))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def rosidl_type_hash(type_name: str) -> str | None:
     """The hash rosidl generated for an installed type (``share/<pkg>/msg/<Type>.json``), or None."""
     root = normalize_type_name(type_name)

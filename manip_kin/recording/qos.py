@@ -25,8 +25,12 @@ HISTORY_NAMES = {0: "system_default", 1: "keep_last", 2: "keep_all", 3: "unknown
 RELIABILITY_NAMES = {0: "system_default", 1: "reliable", 2: "best_effort", 3: "unknown", 4: "best_available"}
 DURABILITY_NAMES = {0: "system_default", 1: "transient_local", 2: "volatile", 3: "unknown", 4: "best_available"}
 LIVELINESS_NAMES = {
-    0: "system_default", 1: "automatic", 2: "manual_by_node", 3: "manual_by_topic",
-    4: "unknown", 5: "best_available",
+    0: "system_default",
+    1: "automatic",
+    2: "manual_by_node",
+    3: "manual_by_topic",
+    4: "unknown",
+    5: "best_available",
 }
 
 
@@ -66,7 +70,7 @@ class QosProfileRecord:
         }
 
     @classmethod
-    def from_rclpy(cls, profile: Any) -> "QosProfileRecord":
+    def from_rclpy(cls, profile: Any) -> QosProfileRecord:
         """From an ``rclpy.qos.QoSProfile`` (e.g. ``TopicEndpointInfo.qos_profile``)."""
 
         def nanoseconds(duration: Any) -> int:
@@ -135,10 +139,7 @@ class OfferedProfiles:
         if not self.profiles:
             return QosProfileRecord().to_rclpy(minimum_depth)
         first = self.profiles[0]
-        if all(
-            (p.reliability, p.durability) == (first.reliability, first.durability)
-            for p in self.profiles
-        ):
+        if all((p.reliability, p.durability) == (first.reliability, first.durability) for p in self.profiles):
             return first.to_rclpy(minimum_depth)
         return QosProfileRecord().to_rclpy(minimum_depth)
 
@@ -148,7 +149,7 @@ class OfferedProfiles:
         return bool(self.profiles) and all(p.durability == "transient_local" for p in self.profiles)
 
     @classmethod
-    def from_rclpy(cls, profiles: Iterable[Any]) -> "OfferedProfiles":
+    def from_rclpy(cls, profiles: Iterable[Any]) -> OfferedProfiles:
         """From rclpy QoS profiles."""
         return cls(tuple(QosProfileRecord.from_rclpy(p) for p in profiles))
 
@@ -187,9 +188,7 @@ def parse_profiles(text_or_list: str | Sequence[dict] | None) -> OfferedProfiles
     if not items:
         return OfferedProfiles()
     if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
-        raise RecordingError(
-            f"offered_qos_profiles must be a list of QoS mappings, got {type(items).__name__}"
-        )
+        raise RecordingError(f"offered_qos_profiles must be a list of QoS mappings, got {type(items).__name__}")
     profiles = []
     for item in items:
         profiles.append(

@@ -45,8 +45,17 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_AND_MAGIC = 1 + 8 + 8 + 8 + 4 + len(MCAP_MAGIC)  # opcode, length, 2 offsets, crc, magic
 # Errors a damaged file can raise from the mcap library, zstd, lz4 or struct decoding.
 _DECODE_ERRORS = (
-    McapError, EOFError, ValueError, struct.error, zlib.error, zstandard.ZstdError,
-    RuntimeError, OSError, KeyError, IndexError, UnicodeDecodeError,
+    McapError,
+    EOFError,
+    ValueError,
+    struct.error,
+    zlib.error,
+    zstandard.ZstdError,
+    RuntimeError,
+    OSError,
+    KeyError,
+    IndexError,
+    UnicodeDecodeError,
 )
 
 
@@ -240,7 +249,7 @@ class RecordingInfo:
 
 
 def _iso(ns: int) -> str:
-    moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.timezone.utc)
+    moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.UTC)
     return moment.isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
@@ -288,9 +297,7 @@ def read_info(path: str | Path) -> RecordingInfo:
                 profile, library = header.profile, header.library
                 summary = reader.get_summary()
                 if summary is None or summary.statistics is None:
-                    raise CorruptRecordingError(
-                        f"{file_path} has no summary statistics; {_salvage_hint(file_path)}"
-                    )
+                    raise CorruptRecordingError(f"{file_path} has no summary statistics; {_salvage_hint(file_path)}")
                 stats = summary.statistics
                 for channel_id, channel in summary.channels.items():
                     schema = summary.schemas.get(channel.schema_id)
@@ -301,7 +308,9 @@ def read_info(path: str | Path) -> RecordingInfo:
                         info = TopicInfo(**{**previous.__dict__, "message_count": previous.message_count + count})
                     topics[channel.topic] = info
                 if stats.message_count:
-                    start_ns = stats.message_start_time if not message_count else min(start_ns, stats.message_start_time)
+                    start_ns = (
+                        stats.message_start_time if not message_count else min(start_ns, stats.message_start_time)
+                    )
                     end_ns = max(end_ns, stats.message_end_time)
                 message_count += stats.message_count
                 chunk_count += len(summary.chunk_indexes)
@@ -369,9 +378,7 @@ def iter_raw_messages(
     for file_path in recording_files(path):
         check_complete(file_path)
         with open(file_path, "rb") as stream:
-            reader = SeekingReader(
-                stream, validate_crcs=True, record_size_limit=file_path.stat().st_size
-            )
+            reader = SeekingReader(stream, validate_crcs=True, record_size_limit=file_path.stat().st_size)
             try:
                 for schema, channel, message in reader.iter_messages(
                     topics=wanted, start_time=start_ns, log_time_order=True
@@ -447,8 +454,7 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
             message = deserialize_message(raw.data, cls)
         except Exception as error:  # rclpy raises a bare RuntimeError-like _rclpy error
             raise CorruptRecordingError(
-                f"{path}: a {raw.type} message on {raw.topic} at {raw.log_time_ns} ns does not "
-                f"deserialize ({error})"
+                f"{path}: a {raw.type} message on {raw.topic} at {raw.log_time_ns} ns does not deserialize ({error})"
             ) from None
         yield RecordedMessage(raw.topic, message, raw.log_time_ns, raw.publish_time_ns)
 
@@ -487,7 +493,11 @@ class SalvageReport:
     def one_line(self) -> str:
         """Summary for the command line."""
         span = (self.end_ns - self.start_ns) / 1e9 if self.message_count else 0.0
-        tail = "source was complete" if self.complete else f"stopped at byte {self.bytes_read} of {self.source_bytes}: {self.stop_reason}"
+        tail = (
+            "source was complete"
+            if self.complete
+            else f"stopped at byte {self.bytes_read} of {self.source_bytes}: {self.stop_reason}"
+        )
         return (
             f"salvaged {self.message_count} messages on {len(self.topic_counts)} topics "
             f"({span:.2f} s) from {self.source} into {self.output}; {tail}"
@@ -566,8 +576,7 @@ def salvage(source: str | Path, output: str | Path, compression: str = "zstd") -
     report.start_ns, report.end_ns = summary.start_ns, summary.end_ns
     if report.message_count == 0 and not report.complete:
         raise CorruptRecordingError(
-            f"nothing recoverable in {source}: {report.stop_reason} (an empty recording was "
-            f"written to {output})"
+            f"nothing recoverable in {source}: {report.stop_reason} (an empty recording was written to {output})"
         )
     return report
 
@@ -575,9 +584,7 @@ def salvage(source: str | Path, output: str | Path, compression: str = "zstd") -
 def _check_salvageable(path: Path) -> None:
     """Raise unless ``path`` is non-empty and starts with the MCAP magic."""
     if path.stat().st_size == 0:
-        raise CorruptRecordingError(
-            f"{path} is empty (0 bytes): the writer never flushed anything; nothing to salvage"
-        )
+        raise CorruptRecordingError(f"{path} is empty (0 bytes): the writer never flushed anything; nothing to salvage")
     with open(path, "rb") as stream:
         head = stream.read(len(MCAP_MAGIC))
     if head != MCAP_MAGIC:

@@ -105,10 +105,7 @@ class _Progress:
             return
         self._last = now
         percent = 100.0 * position_s / self._total_s if self._total_s > 0 else 100.0
-        text = (
-            f"replay: {position_s:7.2f} / {self._total_s:.2f} s ({percent:5.1f}%)  "
-            f"{count} messages  x{self._rate:g}"
-        )
+        text = f"replay: {position_s:7.2f} / {self._total_s:.2f} s ({percent:5.1f}%)  {count} messages  x{self._rate:g}"
         self._stream.write(("\r" + text) if self._tty else (text + "\n"))
         self._stream.flush()
         self._written = True
@@ -153,8 +150,7 @@ def replay(
         )
     if info.message_count and options.start_offset_s * NS_PER_S > info.end_ns - info.start_ns:
         raise RecordingError(
-            f"--start-offset {options.start_offset_s} s is past the end of the recording "
-            f"({info.duration_s:.3f} s long)"
+            f"--start-offset {options.start_offset_s} s is past the end of the recording ({info.duration_s:.3f} s long)"
         )
     classes = {name: message_class(recorded[name].type) for name in selected}
 

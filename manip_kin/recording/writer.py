@@ -248,9 +248,7 @@ class RecordingWriter:
         existing = self._topics.get(topic)
         if existing is not None:
             if existing.type != type_name:
-                raise RecordingError(
-                    f"topic {topic!r} is recorded as {existing.type}; cannot also record {type_name}"
-                )
+                raise RecordingError(f"topic {topic!r} is recorded as {existing.type}; cannot also record {type_name}")
             return
         if type_name not in self._schemas:
             encoding, text = schema or (SCHEMA_ENCODING, full_definition_text(type_name))
@@ -304,9 +302,7 @@ class RecordingWriter:
         """
         entry = self._topics.get(topic)
         if entry is None:
-            raise RecordingError(
-                f"topic {topic!r} is not registered; registered: {', '.join(self._topics) or 'none'}"
-            )
+            raise RecordingError(f"topic {topic!r} is not registered; registered: {', '.join(self._topics) or 'none'}")
         if self._summary is not None:
             raise RecordingError(f"recording {self.layout.mcap_path} is closed")
         if publish_time_ns is None:
@@ -440,7 +436,7 @@ class RecordingWriter:
         )
         return self._summary
 
-    def __enter__(self) -> "RecordingWriter":
+    def __enter__(self) -> RecordingWriter:
         return self
 
     def __exit__(self, *exc_info: object) -> None:

@@ -14,9 +14,7 @@ import re
 from collections.abc import Mapping, Sequence
 
 _PLAIN_SAFE = re.compile(r"^[A-Za-z_/][A-Za-z0-9_./\-]*$")
-_PLAIN_RESERVED = frozenset(
-    {"y", "n", "yes", "no", "on", "off", "true", "false", "null", "~"}
-)
+_PLAIN_RESERVED = frozenset({"y", "n", "yes", "no", "on", "off", "true", "false", "null", "~"})
 
 
 def scalar(value: object) -> str:
@@ -36,9 +34,7 @@ def scalar(value: object) -> str:
 
 
 def _is_collection(value: object) -> bool:
-    return isinstance(value, Mapping) or (
-        isinstance(value, Sequence) and not isinstance(value, (str, bytes))
-    )
+    return isinstance(value, Mapping) or (isinstance(value, Sequence) and not isinstance(value, (str, bytes)))
 
 
 def _emit(value: object, indent: int, lines: list[str], prefix: str) -> None:
