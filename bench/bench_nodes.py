@@ -106,9 +106,9 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
         except OSError:
             pass
-    commands = PolledSubscription(client.node, Float64MultiArray, "/joint_velocity_commands", 100)
+    commands = PolledSubscription(client.node, Float64MultiArray, "joint_velocity_commands", 100)
     client.spin_for(0.5)
-    publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "/goal_pose")
+    publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "goal_pose")
     latencies = []
     try:
         for trial in range(trials):
@@ -169,7 +169,7 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         converged, _ = client.wait_converged(client.send_goal(make_transform(down, start)), 30)
         samples: list[np.ndarray] = []
         client.node.create_subscription(
-            PoseStamped, "/tool_pose", lambda m: samples.append(pose_stamped_to_matrix(m)[:3, 3]), 1000
+            PoseStamped, "tool_pose", lambda m: samples.append(pose_stamped_to_matrix(m)[:3, 3]), 1000
         )
         client.spin_for(0.3)
         done = client.wait_line_done(client.send_line(make_transform(down, end)), 15)

@@ -98,9 +98,15 @@ def _twist_series(samples: list[tuple[float, object]]) -> TwistSeries:
     return TwistSeries(time, angular, linear)
 
 
-def load_run(path: str | Path) -> RunData:
-    """Read a recording (``.mcap`` file or bag directory) into :class:`RunData`."""
+def load_run(path: str | Path, namespace: str = "") -> RunData:
+    """Read a recording (``.mcap`` file or bag directory) into :class:`RunData`.
+
+    ``namespace`` selects the pipeline (``/left`` reads ``/left/joint_states``...).
+    """
+    from manip_kin.pipeline.client import normalize_namespace
     from manip_kin.recording import read_messages
+
+    prefix = normalize_namespace(namespace)
 
     by_topic: dict[str, list[tuple[int, object]]] = {}
     for topic, message, log_time_ns, _publish_ns in read_messages(path):
@@ -110,7 +116,7 @@ def load_run(path: str | Path) -> RunData:
     start_ns = min(samples[0][0] for samples in by_topic.values())
 
     def seconds(topic: str) -> list[tuple[float, object]]:
-        return [((t - start_ns) * 1e-9, m) for t, m in by_topic.get(topic, [])]
+        return [((t - start_ns) * 1e-9, m) for t, m in by_topic.get(prefix + topic, [])]
 
     run = RunData()
     joint_samples = [(t, m) for t, m in seconds("/joint_states") if len(m.position)]

@@ -56,6 +56,24 @@ def add_pose_arguments(parser: argparse.ArgumentParser, required: bool = True) -
     )
 
 
+def add_namespace_argument(parser: argparse.ArgumentParser) -> None:
+    """``--namespace NS``: the ROS namespace of the pipeline the command talks to."""
+    parser.add_argument(
+        "--namespace",
+        default="",
+        metavar="NS",
+        help="ROS namespace of the nodes to talk to, as started with --ros-args -r __ns:=/NS "
+        "(default: the root namespace)",
+    )
+
+
+def namespace_from_args(args: argparse.Namespace) -> str:
+    """``--namespace`` normalised (``left`` → ``/left``); InvalidArgumentError when not a ROS namespace."""
+    from manip_kin.pipeline.client import normalize_namespace
+
+    return normalize_namespace(args.namespace)
+
+
 def add_json_argument(parser: argparse.ArgumentParser) -> None:
     """``--json``: one JSON object on stdout."""
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout and nothing else there")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_kin.cli.common import format_matrix
+from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
 from manip_kin.kinematics import frame_pose, jacobian
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
@@ -55,6 +55,7 @@ def register(subparsers) -> None:
         "--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)"
     )
     parser.add_argument("--timeout", type=float, default=60.0, metavar="S", help="limit for each live leg [s]")
+    add_namespace_argument(parser)
     parser.set_defaults(run=run_demo)
 
 
@@ -126,6 +127,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     from manip_kin.pipeline import NodeProcess, Pipeline, ensure_ros_isolation, pipeline_processes
 
     env = ensure_ros_isolation()
+    namespace = namespace_from_args(args)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.exists():
@@ -145,7 +147,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
         "genova7", rate_hz=args.rate, controller=controller, generator=generator
     )
     exit_code = 0
-    with Pipeline(processes) as pipeline:
+    with Pipeline(processes, namespace=namespace) as pipeline:
         print(f"started {', '.join(pipeline.processes)} (logs in {pipeline.log_dir})", flush=True)
         client = pipeline.client()
         legs = (
@@ -187,6 +189,6 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     from manip_kin.recording import read_info
 
     print(read_info(out).to_text())
-    figures = plot_run(load_run(out), out.parent / f"{out.stem}_plots", title="genova7 demo")
+    figures = plot_run(load_run(out, namespace=namespace), out.parent / f"{out.stem}_plots", title="genova7 demo")
     print(f"plots: {', '.join(str(p) for p in figures)}")
     return exit_code

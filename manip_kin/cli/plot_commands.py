@@ -21,13 +21,19 @@ def register(subparsers) -> None:
         "--out", metavar="DIR", default=None, help="output directory (default: next to FILE, <name>_plots)"
     )
     parser.add_argument("--title", default="", help="prefix for the figure titles")
+    parser.add_argument(
+        "--namespace",
+        default="",
+        metavar="NS",
+        help="plot the pipeline recorded in namespace NS (/NS/joint_states...; default: the root namespace)",
+    )
     parser.set_defaults(run=run_plot)
 
 
 def run_plot(args: argparse.Namespace) -> int:
     source = Path(args.file)
     out_dir = Path(args.out) if args.out else source.parent / f"{source.stem}_plots"
-    run = load_run(source)
+    run = load_run(source, namespace=args.namespace)
     paths = plot_run(run, out_dir, title=args.title or source.stem)
     for path in paths:
         print(path)

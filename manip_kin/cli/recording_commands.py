@@ -68,6 +68,14 @@ def register(subparsers) -> None:
         metavar="S",
         help="wait up to S seconds for every topic to have a subscriber before starting (default 1)",
     )
+    replay.add_argument(
+        "--namespace",
+        default=None,
+        metavar="NS",
+        help="publish the recorded manip_kin topics (joint_states, goal_pose, ...) in namespace NS, "
+        "whatever namespace they were recorded in (e.g. /left/joint_states -> /right/joint_states); "
+        "--remap wins for the topics it names",
+    )
     replay.add_argument("--quiet", action="store_true", help="no progress line")
     replay.set_defaults(run=run_replay)
 
@@ -100,11 +108,14 @@ def run_replay(args: argparse.Namespace) -> int:
     """``manip_kin replay``."""
     from manip_kin.recording.replay import ReplayOptions, parse_remaps, replay
 
+    remaps = parse_remaps(args.remap)
+    if args.namespace is not None:
+        remaps = {**namespace_remaps(args.file, args.namespace), **remaps}
     options = ReplayOptions(
         rate=args.rate,
         loop=args.loop,
         topics=args.topics,
-        remaps=parse_remaps(args.remap),
+        remaps=remaps,
         start_offset_s=args.start_offset,
         clock=args.clock,
         wait_for_subscribers_s=max(0.0, args.wait_for_subscribers),
@@ -116,3 +127,23 @@ def run_replay(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def namespace_remaps(path: str, namespace: str) -> dict[str, str]:
+    """Recorded topic → the same manip_kin topic in ``namespace``, for every manip_kin topic of ``path``.
+
+    A manip_kin topic is one whose last name part is a pipeline topic (``joint_states``,
+    ``goal_pose``...); global topics (``/diagnostics``, ``/tf``) and others keep their names.
+    """
+    from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
+    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.recording.reader import read_info
+
+    prefix = normalize_namespace(namespace)
+    relative = {name for name in PIPELINE_TOPIC_TYPES if not name.startswith("/")}
+    remaps = {}
+    for topic in read_info(path).topics:
+        name = topic.name
+        if name.rsplit("/", 1)[-1] in relative:
+            remaps[name] = f"{prefix}/{name.rsplit('/', 1)[-1]}"
+    return remaps

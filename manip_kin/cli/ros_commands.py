@@ -17,7 +17,14 @@ import argparse
 import sys
 import time
 
-from manip_kin.cli.common import add_json_argument, add_pose_arguments, pose_from_args, print_json
+from manip_kin.cli.common import (
+    add_json_argument,
+    add_namespace_argument,
+    add_pose_arguments,
+    namespace_from_args,
+    pose_from_args,
+    print_json,
+)
 from manip_kin.errors import InvalidArgumentError
 
 
@@ -25,17 +32,18 @@ def register(subparsers) -> None:
     """Add ``goal`` and ``line``."""
     goal = subparsers.add_parser(
         "goal",
-        help="publish one goal pose on /goal_pose for cartesian_controller (optionally wait until reached)",
+        help="publish one goal pose on goal_pose for cartesian_controller (optionally wait until reached)",
         description="Publish one goal pose of the controlled frame (tool if any, else end effector) in the "
-        "base frame on /goal_pose, and exit once the controller has it. Example: "
-        "manip_kin goal --xyz 0.2 -0.7 0.3 --rpy 0 1.57 0 --wait",
+        "base frame on goal_pose (in --namespace), and exit once the controller has it. Example: "
+        "manip_kin goal --xyz 0.2 -0.7 0.3 --rpy 0 1.57 0 --wait --namespace /left",
     )
     _add_common(goal)
     goal.set_defaults(run=run_goal)
     line = subparsers.add_parser(
         "line",
-        help="publish one line target on /line_target for trajectory_generator (optionally wait until done)",
-        description="Publish the end pose of a straight line on /line_target; trajectory_generator plans the "
+        help="publish one line target on line_target for trajectory_generator (optionally wait until done)",
+        description="Publish the end pose of a straight line on line_target (in --namespace); "
+        "trajectory_generator plans the "
         "line from the current tool pose and streams it to the controller. Example: "
         "manip_kin line --xyz -0.4 0.3 0.5 --rpy 0 1.5708 0 --wait",
     )
@@ -60,6 +68,7 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
         metavar="S",
         help="seconds to wait for a subscriber, and for convergence with --wait (default 30)",
     )
+    add_namespace_argument(parser)
     add_json_argument(parser)
 
 
@@ -110,6 +119,7 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     except PipelineError as error:
         print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
         return 2
+    topic = client.topic(topic)
     payload = {"topic": topic, "stamp": stamp, "xyz": pose[:3, 3].tolist(), "frame": args.frame}
     if not args.wait:
         _report(args, payload, f"{label} {pose[:3, 3].round(4).tolist()} delivered on {topic} (stamp {stamp})")
@@ -139,8 +149,9 @@ def run_goal(args: argparse.Namespace) -> int:
     from manip_kin.pipeline import PipelineClient
 
     _check_timeout(args)
-    with PipelineClient(watch_state=False, base_frame=args.frame) as client:
-        delivered = _deliver(args, client, client.send_goal, "/goal_pose", "goal", ("cartesian_controller",))
+    namespace = namespace_from_args(args)
+    with PipelineClient(watch_state=False, base_frame=args.frame, namespace=namespace) as client:
+        delivered = _deliver(args, client, client.send_goal, "goal_pose", "goal", ("cartesian_controller",))
         if isinstance(delivered, int):
             return delivered
         start, stamp, payload = delivered
@@ -152,12 +163,13 @@ def run_line(args: argparse.Namespace) -> int:
     from manip_kin.pipeline import PipelineClient, PipelineError
 
     _check_timeout(args)
-    with PipelineClient(watch_state=False, base_frame=args.frame) as client:
+    namespace = namespace_from_args(args)
+    with PipelineClient(watch_state=False, base_frame=args.frame, namespace=namespace) as client:
         delivered = _deliver(
             args,
             client,
             client.send_line,
-            "/line_target",
+            "line_target",
             "line target",
             ("trajectory_generator", "cartesian_controller"),
         )

@@ -2,7 +2,7 @@
 
 The node holds one :class:`~manip_kin.control.CartesianController`; every cycle of its
 :class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state, goal pose
-and goal twist, runs one control step and publishes ``/joint_velocity_commands``.
+and goal twist, runs one control step and publishes ``joint_velocity_commands``.
 ``/diagnostics`` carries the state (see :data:`STATES`), the errors and the loop timing,
 at ``diagnostics_rate_hz`` and at once when the state changes.
 """
@@ -99,19 +99,19 @@ PARAMETERS = (
 USAGE = usage_text(
     NODE_NAME,
     "Resolved-rate cartesian controller: drives the controlled frame (tool if any, else end\n"
-    "effector) to the latest /goal_pose with joint-rate commands at rate_hz, adding the\n"
-    "/goal_twist feed-forward while it is fresh. A goal with a non-finite value, a quaternion far\n"
+    "effector) to the latest goal_pose with joint-rate commands at rate_hz, adding the\n"
+    "goal_twist feed-forward while it is fresh. A goal with a non-finite value, a quaternion far\n"
     "from unit length or a frame other than the base frame is rejected (previous goal kept).\n"
     "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
     subscribes=[
-        ("/goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
-        ("/goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
-        ("/joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
+        ("goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
+        ("goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
+        ("joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
     ],
     publishes=[
-        ("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
+        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
         (
             "/diagnostics",
             "diagnostic_msgs/DiagnosticArray",
@@ -151,10 +151,10 @@ class CartesianControllerNode(LoopingNode):
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
 
-        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 10)
-        self._goal_sub = PolledSubscription(self, PoseStamped, "/goal_pose", 10)
-        self._twist_sub = PolledSubscription(self, TwistStamped, "/goal_twist", 10)
-        self._command_pub = self.create_publisher(Float64MultiArray, "/joint_velocity_commands", 10)
+        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
+        self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
+        self._twist_sub = PolledSubscription(self, TwistStamped, "goal_twist", 10)
+        self._command_pub = self.create_publisher(Float64MultiArray, "joint_velocity_commands", 10)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
         self._zeros = np.zeros(self.model.dof)
@@ -194,13 +194,17 @@ class CartesianControllerNode(LoopingNode):
                 self._q_time_ns = now_ns
             except conv.InvalidMessageError as error:
                 self.rejected_joint_states += 1
-                self._warn("joint_state:" + conv.problem_kind(str(error)), f"rejected /joint_states: {error}")
+                self._warn(
+                    "joint_state:" + conv.problem_kind(str(error)),
+                    f"rejected {self._joint_state_sub.subscription.topic_name}: {error}",
+                )
         while (msg := self._goal_sub.take()) is not None:
             problem = conv.pose_problem(msg, self.base_frame, "goal pose", self._quaternion_tolerance)
             if problem is not None:
                 self.rejected_goals += 1
                 self._warn(
-                    "goal:" + conv.problem_kind(problem), f"rejected /goal_pose: {problem}; keeping the previous goal"
+                    "goal:" + conv.problem_kind(problem),
+                    f"rejected {self._goal_sub.subscription.topic_name}: {problem}; keeping the previous goal",
                 )
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
@@ -211,7 +215,8 @@ class CartesianControllerNode(LoopingNode):
             if problem is not None:
                 self.rejected_twists += 1
                 self._warn(
-                    "twist:" + conv.problem_kind(problem), f"rejected /goal_twist: {problem}; feed-forward not used"
+                    "twist:" + conv.problem_kind(problem),
+                    f"rejected {self._twist_sub.subscription.topic_name}: {problem}; feed-forward not used",
                 )
                 continue
             angular, linear = conv.twist_to_arrays(msg.twist)
@@ -289,7 +294,7 @@ class CartesianControllerNode(LoopingNode):
             ("rejected_joint_states", str(self.rejected_joint_states)),
         ] + stats_key_values(self.loop.stats())
         level = {"stale input": "warn", "singular": "warn", "joint-limited": "ok"}.get(self.state, "ok")
-        status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
+        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
 

@@ -253,6 +253,13 @@ class LoopingNode(Node):
             return
         self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
 
+    @property
+    def status_name(self) -> str:
+        """Name of this node's ``/diagnostics`` status: its namespace and name without the leading
+        slash (``cartesian_controller``, ``left/cartesian_controller``), so that two pipelines in
+        two namespaces report apart on the one global ``/diagnostics``."""
+        return self.get_fully_qualified_name().lstrip("/")
+
     def stop(self) -> None:
         """Stop the loop thread (before the node is destroyed)."""
         self.loop.stop()

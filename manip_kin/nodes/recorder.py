@@ -36,30 +36,18 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.reader import message_class
 from manip_kin.recording.writer import COMPRESSION_CHOICES, RecordingWriter
 
-# Every manip_kin topic and its type (shared/interfaces.md). These are subscribed at start,
-# before any publisher is seen, so a one-shot message (a goal sent by `manip_kin goal`
-# right after its publisher appears) is not missed while discovery catches up.
-MANIP_KIN_TOPIC_TYPES = {
-    "/joint_states": "sensor_msgs/msg/JointState",
-    "/joint_velocity_commands": "std_msgs/msg/Float64MultiArray",
-    "/goal_pose": "geometry_msgs/msg/PoseStamped",
-    "/goal_twist": "geometry_msgs/msg/TwistStamped",
-    "/line_target": "geometry_msgs/msg/PoseStamped",
-    "/planned_path": "nav_msgs/msg/Path",
-    "/ee_pose": "geometry_msgs/msg/PoseStamped",
-    "/tool_pose": "geometry_msgs/msg/PoseStamped",
-    "/ee_twist": "geometry_msgs/msg/TwistStamped",
-    "/tool_twist": "geometry_msgs/msg/TwistStamped",
-    "/robot_description": "std_msgs/msg/String",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-}
+# Every manip_kin topic is subscribed at start, before any publisher is seen, so a one-shot
+# message (a goal sent by `manip_kin goal` right after its publisher appears) is not missed
+# while discovery catches up. Relative names resolve in the recorder's namespace.
+MANIP_KIN_TOPIC_TYPES = PIPELINE_TOPIC_TYPES
 DEFAULT_TOPICS = tuple(MANIP_KIN_TOPIC_TYPES)
-LATCHED_TOPICS = frozenset({"/robot_description"})
+LATCHED_TOPICS = frozenset({"robot_description"})
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_CHECK_PERIOD_S = 0.25
 INTAKE_PERIOD_S = 0.005
@@ -73,9 +61,11 @@ USAGE = f"""usage: recorder [--ros-args -p NAME:=VALUE ...]
 Record topics to a rosbag2-compatible MCAP file (ros2 bag, Foxglove, rosbags read it).
 
 parameters:
-  topics        string[]  topics to record (default: every manip_kin topic:
+  topics        string[]  topics to record; relative names resolve in the recorder's namespace
+                          (default: every manip_kin topic of its namespace:
                           {" ".join(DEFAULT_TOPICS)})
-  all_topics    bool      record every topic discovered instead (hidden ones excluded; default false)
+  all_topics    bool      record every topic discovered instead, in any namespace, as
+                          `ros2 bag record -a` (hidden ones excluded; default false)
   output        string    FILE.mcap for a single file, or a bag directory path
                           (default runs/recording_YYYYmmdd_HHMMSS.mcap)
   compression   string    zstd (default) | lz4 | none: MCAP chunk compression
@@ -84,6 +74,14 @@ parameters:
 
 Ctrl-C or SIGTERM finish the file; a SIGKILL loses at most about the last second,
 and `manip_kin info --salvage OUT FILE` recovers the rest."""
+
+
+def _manip_kin_type(topic: str) -> str:
+    """The type of a manip_kin topic in any namespace (``/left/joint_states``), else ""."""
+    if topic in MANIP_KIN_TOPIC_TYPES:
+        return MANIP_KIN_TOPIC_TYPES[topic]
+    name = topic.rsplit("/", 1)[-1]
+    return MANIP_KIN_TOPIC_TYPES.get(name, "")
 
 
 def _descriptor(description: str, parameter_type: int) -> ParameterDescriptor:
@@ -190,8 +188,10 @@ class RecorderNode(Node):
         self._finished_line: str | None = None
         self._stop_reason = ""
         if not self._all_topics:
-            for topic in sorted(self._wanted & set(MANIP_KIN_TOPIC_TYPES)):
-                self._subscribe(topic, [], [MANIP_KIN_TOPIC_TYPES[topic]])
+            for topic in sorted(self._wanted):
+                known_type = _manip_kin_type(topic)
+                if known_type:
+                    self._subscribe(topic, [], [known_type])
         self._discover()
         self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self.create_timer(FLUSH_CHECK_PERIOD_S, self._flush_if_due)
@@ -255,7 +255,7 @@ class RecorderNode(Node):
         else:
             # As manip_kin's own publishers offer it: reliable, transient local for the
             # description. The channel is added with the first message, when the publisher is known.
-            latched = topic in LATCHED_TOPICS
+            latched = topic.rsplit("/", 1)[-1] in LATCHED_TOPICS
             qos = QoSProfile(
                 history=HistoryPolicy.KEEP_LAST,
                 depth=1 if latched else SUBSCRIPTION_DEPTH,
@@ -291,7 +291,7 @@ class RecorderNode(Node):
             offered = OfferedProfiles.from_rclpy(p.qos_profile for p in publishers)
             type_hash = str(publishers[0].topic_type_hash)
         else:  # the publisher is already gone: record what manip_kin's publishers offer
-            latched = topic in LATCHED_TOPICS
+            latched = topic.rsplit("/", 1)[-1] in LATCHED_TOPICS
             offered = default_offer(transient_local=latched, depth=1 if latched else 10)
             type_hash = ""
         self._writer.add_topic(

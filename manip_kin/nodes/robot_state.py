@@ -2,8 +2,8 @@
 
 The node holds one :class:`JointIntegrator` (plain numpy) and, every cycle of its
 :class:`~manip_kin.nodes.rate_loop.RateLoop`, takes the latest command, integrates it
-and publishes ``/joint_states``, ``/ee_pose``, ``/tool_pose``, ``/ee_twist`` and
-``/tool_twist``. ``/robot_description`` is published once, transient local.
+and publishes ``joint_states``, ``ee_pose``, ``tool_pose``, ``ee_twist`` and
+``tool_twist``. ``robot_description`` is published once, transient local.
 """
 
 from __future__ import annotations
@@ -69,15 +69,15 @@ USAGE = usage_text(
     "wrong length or a non-finite value is rejected with a log line.",
     PARAMETERS,
     subscribes=[
-        ("/joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")
+        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")
     ],
     publishes=[
-        ("/joint_states", "sensor_msgs/JointState", "name, position, velocity, stamped"),
-        ("/ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
-        ("/tool_pose", "geometry_msgs/PoseStamped", "tool (end effector if no tool) in the base frame"),
-        ("/ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
-        ("/tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
-        ("/robot_description", "std_msgs/String", "URDF of the model, once, transient local"),
+        ("joint_states", "sensor_msgs/JointState", "name, position, velocity, stamped"),
+        ("ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
+        ("tool_pose", "geometry_msgs/PoseStamped", "tool (end effector if no tool) in the base frame"),
+        ("ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
+        ("tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
+        ("robot_description", "std_msgs/String", "URDF of the model, once, transient local"),
         ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state"),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000  (robots: {', '.join(bundled_robot_names())})",
@@ -231,17 +231,17 @@ class RobotStateNode(LoopingNode):
             int(1e9 / params["diagnostics_rate_hz"]) if params["diagnostics_rate_hz"] > 0 else 0
         )
 
-        self._command_sub = PolledSubscription(self, Float64MultiArray, "/joint_velocity_commands", 10)
-        self._joint_state_pub = self.create_publisher(JointState, "/joint_states", 10)
-        self._ee_pose_pub = self.create_publisher(PoseStamped, "/ee_pose", 10)
-        self._tool_pose_pub = self.create_publisher(PoseStamped, "/tool_pose", 10)
-        self._ee_twist_pub = self.create_publisher(TwistStamped, "/ee_twist", 10)
-        self._tool_twist_pub = self.create_publisher(TwistStamped, "/tool_twist", 10)
+        self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", 10)
+        self._joint_state_pub = self.create_publisher(JointState, "joint_states", 10)
+        self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", 10)
+        self._tool_pose_pub = self.create_publisher(PoseStamped, "tool_pose", 10)
+        self._ee_twist_pub = self.create_publisher(TwistStamped, "ee_twist", 10)
+        self._tool_twist_pub = self.create_publisher(TwistStamped, "tool_twist", 10)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
         )
-        self._description_pub = self.create_publisher(String, "/robot_description", latched)
+        self._description_pub = self.create_publisher(String, "robot_description", latched)
 
         # Messages go out pre-serialised (see conversions.PoseStampedCdr): half the publish cost.
         self._joint_state_cdr = conv.JointStateCdr(self.model.joint_names)
@@ -267,7 +267,7 @@ class RobotStateNode(LoopingNode):
         try:
             from manip_kin.urdf import model_to_urdf
         except ImportError as error:  # the exporter is optional for the simulation itself
-            self.get_logger().warning(f"/robot_description not published: {error}")
+            self.get_logger().warning(f"robot_description not published: {error}")
             return
         self._description_pub.publish(String(data=model_to_urdf(self.model)))
 
@@ -280,7 +280,7 @@ class RobotStateNode(LoopingNode):
                 self.rejected_commands += 1
                 self._warn(
                     conv.problem_kind(problem),
-                    f"rejected /joint_velocity_commands: {problem}; keeping the previous command",
+                    f"rejected {self._command_sub.subscription.topic_name}: {problem}; keeping the previous command",
                 )
                 continue
             self._command = values
@@ -328,7 +328,7 @@ class RobotStateNode(LoopingNode):
             ("velocity_scale", f"{integrator.velocity_scale:.4f}"),
         ] + stats_key_values(self.loop.stats())
         level = "warn" if limited or self.rejected_commands else "ok"
-        status = conv.make_diagnostic_status(self.get_name(), level, command_state, self.model.name, values)
+        status = conv.make_diagnostic_status(self.status_name, level, command_state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(stamp, [status]))
 
 

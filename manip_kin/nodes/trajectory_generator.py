@@ -1,11 +1,11 @@
 """``trajectory_generator``: streams a straight-line goal from the current tool pose to a target.
 
-On each valid ``/line_target`` the node plans a :class:`~manip_kin.trajectory.LineTrajectory`
-from the newest ``/tool_pose``, checks the arm can follow it
-(:func:`~manip_kin.trajectory.check_line_reachable` from the newest ``/joint_states``),
-publishes it on ``/planned_path`` and then, every cycle of its
-:class:`~manip_kin.nodes.rate_loop.RateLoop`, publishes the sampled ``/goal_pose`` and
-``/goal_twist`` until the end. At the end it publishes the final pose once with a zero
+On each valid ``line_target`` the node plans a :class:`~manip_kin.trajectory.LineTrajectory`
+from the newest ``tool_pose``, checks the arm can follow it
+(:func:`~manip_kin.trajectory.check_line_reachable` from the newest ``joint_states``),
+publishes it on ``planned_path`` and then, every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop`, publishes the sampled ``goal_pose`` and
+``goal_twist`` until the end. At the end it publishes the final pose once with a zero
 twist and stops streaming: the controller holds its last goal, and a goal sent later by
 hand (``manip_kin goal``) is not overwritten. A new target pre-empts a running line, from
 the current tool pose; a rejected target leaves a running line alone.
@@ -37,7 +37,7 @@ STATES = ("idle", "streaming", "holding", "rejected")
 
 PARAMETERS = (
     ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file (for the reach check)"),
-    ParamSpec("rate_hz", "float", 500.0, "rate of /goal_pose and /goal_twist while a line runs", "Hz", positive=True),
+    ParamSpec("rate_hz", "float", 500.0, "rate of goal_pose and goal_twist while a line runs", "Hz", positive=True),
     ParamSpec("time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS),
     ParamSpec(
         "max_linear_velocity",
@@ -69,7 +69,7 @@ PARAMETERS = (
         "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
     ),
     ParamSpec(
-        "tool_pose_timeout", "float", 0.5, "a target is rejected when /tool_pose is older than this", "s", positive=True
+        "tool_pose_timeout", "float", 0.5, "a target is rejected when tool_pose is older than this", "s", positive=True
     ),
     ParamSpec(
         "quaternion_tolerance",
@@ -78,7 +78,7 @@ PARAMETERS = (
         "a target quaternion whose length differs from 1 by more is rejected",
         positive=True,
     ),
-    ParamSpec("path_points", "int", 50, "poses in /planned_path", positive=True),
+    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True),
     ParamSpec(
         "diagnostics_rate_hz",
         "float",
@@ -98,22 +98,22 @@ PARAMETERS = (
 
 USAGE = usage_text(
     NODE_NAME,
-    "Straight-line goals: on a /line_target pose, plans a line from the current /tool_pose\n"
+    "Straight-line goals: on a line_target pose, plans a line from the current tool_pose\n"
     "(position along the segment, orientation by slerp) timed by time_scaling within the\n"
     "velocity and acceleration limits, checks the arm can follow it from the current\n"
-    "/joint_states, and streams /goal_pose and /goal_twist at rate_hz until the end, then\n"
+    "joint_states, and streams goal_pose and goal_twist at rate_hz until the end, then\n"
     "publishes the final pose once and holds. A new target pre-empts the running line.\n"
     "Unreachable or malformed targets are rejected with a log line.",
     PARAMETERS,
     subscribes=[
-        ("/line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
-        ("/tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
-        ("/joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
+        ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
+        ("tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
+        ("joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
     ],
     publishes=[
-        ("/goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
-        ("/goal_twist", "geometry_msgs/TwistStamped", "the line's velocity (feed-forward)"),
-        ("/planned_path", "nav_msgs/Path", "the planned line, transient local"),
+        ("goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
+        ("goal_twist", "geometry_msgs/TwistStamped", "the line's velocity (feed-forward)"),
+        ("planned_path", "nav_msgs/Path", "the planned line, transient local"),
         ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, progress, target and final goal stamps"),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=irb120 -p time_scaling:=constant -p max_linear_velocity:=0.4",
@@ -142,17 +142,17 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._path_points = max(2, params["path_points"])
         self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
 
-        self._target_sub = PolledSubscription(self, PoseStamped, "/line_target", 10)
+        self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
         # not turning 2 kHz of state messages into Python objects keeps this loop cheap.
-        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "/tool_pose", 1)
-        self._joint_state_sub = PolledSubscription(self, JointState, "/joint_states", 1)
-        self._goal_pub = self.create_publisher(PoseStamped, "/goal_pose", 10)
-        self._twist_pub = self.create_publisher(TwistStamped, "/goal_twist", 10)
+        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "tool_pose", 1)
+        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 1)
+        self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", 10)
+        self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", 10)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
         )
-        self._path_pub = self.create_publisher(Path, "/planned_path", latched)
+        self._path_pub = self.create_publisher(Path, "planned_path", latched)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._goal_cdr = conv.PoseStampedCdr(self.base_frame)
         self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
@@ -199,7 +199,10 @@ class TrajectoryGeneratorNode(LoopingNode):
         # A rejected target does not replace the running line's target_stamp.
         self.rejected_stamp = conv.stamp_key(msg.header.stamp)
         kept = "the running line goes on" if self.state == "streaming" else "nothing to do"
-        self._error("target:" + conv.problem_kind(reason), f"rejected /line_target: {reason}; {kept}")
+        self._error(
+            "target:" + conv.problem_kind(reason),
+            f"rejected {self._target_sub.subscription.topic_name}: {reason}; {kept}",
+        )
         if self.state != "streaming":
             self.state, self.detail = "rejected", reason
 
@@ -216,7 +219,9 @@ class TrajectoryGeneratorNode(LoopingNode):
             self._tool_pose_msg is None
             or clock_ns - conv.stamp_to_ns(self._tool_pose_msg.header.stamp) > self._tool_pose_timeout_ns
         ):
-            self._reject(target_msg, "no current /tool_pose (is robot_state running?)")
+            self._reject(
+                target_msg, f"no current {self._tool_pose_sub.subscription.topic_name} (is robot_state running?)"
+            )
             return False
         tool_problem = conv.pose_problem(self._tool_pose_msg, self.base_frame, "tool pose", self._quaternion_tolerance)
         if tool_problem is not None:
@@ -228,7 +233,10 @@ class TrajectoryGeneratorNode(LoopingNode):
             line = LineTrajectory.plan(start, goal, self.time_scaling, self.limits)
             if self.check_reach:
                 if self._joint_state_msg is None:
-                    self._reject(target_msg, "no /joint_states received yet for the reach check")
+                    self._reject(
+                        target_msg,
+                        f"no {self._joint_state_sub.subscription.topic_name} received yet for the reach check",
+                    )
                     return False
                 q = self._mapper.positions(self._joint_state_msg)
                 report = check_line_reachable(self.model, line, q)
@@ -307,7 +315,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             ("last_rejection", self.last_rejection),
         ] + stats_key_values(self.loop.stats())
         level = "warn" if self.state == "rejected" else "ok"
-        status = conv.make_diagnostic_status(self.get_name(), level, self.state, self.model.name, values)
+        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
 

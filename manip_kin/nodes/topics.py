@@ -1,0 +1,23 @@
+"""The pipeline's topic names and types (docs/interfaces.md), without importing rclpy.
+
+Names are relative, so ``--ros-args -r __ns:=/left`` moves a whole pipeline into ``/left``;
+``/diagnostics`` stays global, as in ROS.
+"""
+
+from __future__ import annotations
+
+#: Topic name → ROS type name, every topic a manip_kin pipeline uses.
+PIPELINE_TOPIC_TYPES = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "joint_velocity_commands": "std_msgs/msg/Float64MultiArray",
+    "goal_pose": "geometry_msgs/msg/PoseStamped",
+    "goal_twist": "geometry_msgs/msg/TwistStamped",
+    "line_target": "geometry_msgs/msg/PoseStamped",
+    "planned_path": "nav_msgs/msg/Path",
+    "ee_pose": "geometry_msgs/msg/PoseStamped",
+    "tool_pose": "geometry_msgs/msg/PoseStamped",
+    "ee_twist": "geometry_msgs/msg/TwistStamped",
+    "tool_twist": "geometry_msgs/msg/TwistStamped",
+    "robot_description": "std_msgs/msg/String",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}

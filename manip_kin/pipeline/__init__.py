@@ -1,0 +1,31 @@
+"""Run the manip_kin nodes without ``ros2 launch`` and talk to them from Python.
+
+* :mod:`~manip_kin.pipeline.domain`: DDS isolation (discovery range, a free domain id);
+* :mod:`~manip_kin.pipeline.supervisor`: :class:`Pipeline`, node processes started and
+  stopped together, optionally in a namespace;
+* :mod:`~manip_kin.pipeline.client`: :class:`PipelineClient`, an rclpy node that sends goals
+  and line targets and follows ``/diagnostics``.
+
+None of these imports rclpy at import time (test/conftest.py sets the environment first).
+"""
+
+from manip_kin.pipeline.client import PipelineClient, Status, normalize_namespace, status_name
+from manip_kin.pipeline.domain import ensure_ros_isolation, fresh_domain_env, pick_free_domain
+from manip_kin.pipeline.errors import PipelineError
+from manip_kin.pipeline.supervisor import PIPELINE_NODES, NodeProcess, Pipeline, find_executable, pipeline_processes
+
+__all__ = [
+    "PIPELINE_NODES",
+    "NodeProcess",
+    "Pipeline",
+    "PipelineClient",
+    "PipelineError",
+    "Status",
+    "ensure_ros_isolation",
+    "find_executable",
+    "fresh_domain_env",
+    "normalize_namespace",
+    "pick_free_domain",
+    "pipeline_processes",
+    "status_name",
+]

@@ -1,0 +1,371 @@
+"""A small rclpy node to drive and observe a running pipeline (``manip_kin goal``/``line``, demo, tests).
+
+:class:`PipelineClient` lives in its own rclpy context, in the namespace of the pipeline it
+talks to: it sends a goal or a line target, waits until the controller reports the goal
+converged (matched by the goal's stamp in ``/diagnostics``), and reads ``joint_states`` and
+``tool_pose``. Topic names are relative, so ``PipelineClient(namespace="/left")`` talks to
+the pipeline started with ``-r __ns:=/left``; ``/diagnostics`` is global, and each node's
+status there is named ``<namespace>/<node>`` (see :func:`status_name`).
+
+rclpy is imported when a client is made, not when this module is imported (test/conftest.py
+sets the environment before rclpy loads).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from manip_kin.errors import InvalidArgumentError
+from manip_kin.pipeline.domain import ensure_ros_isolation
+from manip_kin.pipeline.errors import PipelineError
+
+
+def normalize_namespace(namespace: str | None) -> str:
+    """``"left"``, ``"/left/"`` → ``"/left"``; ``""``, ``"/"``, None → ``""`` (the root namespace).
+
+    Raises:
+        InvalidArgumentError: not a valid ROS namespace (letters, digits, ``_`` and ``/``;
+            no token starting with a digit, no ``//``).
+    """
+    text = (namespace or "").strip().strip("/")
+    if not text:
+        return ""
+    tokens = text.split("/")
+    for token in tokens:
+        if not token or token[0].isdigit() or not all(c.isalnum() or c == "_" for c in token) or not token.isascii():
+            raise InvalidArgumentError(
+                f"namespace {namespace!r} is not a valid ROS namespace; valid: names of letters, digits and _ "
+                "separated by /, each not starting with a digit (e.g. /left or /cell1/arm)"
+            )
+    return "/" + "/".join(tokens)
+
+
+def status_name(node_name: str, namespace: str = "") -> str:
+    """The ``/diagnostics`` status name of node ``node_name`` in ``namespace``.
+
+    Nodes name their status by their fully qualified name without the leading slash:
+    ``cartesian_controller`` in the root namespace, ``left/cartesian_controller`` in
+    ``/left``. A ``node_name`` that already holds a ``/`` is taken as fully qualified.
+    """
+    if "/" in node_name.strip("/"):
+        return node_name.strip("/")
+    return f"{normalize_namespace(namespace)}/{node_name}".lstrip("/")
+
+
+@dataclass(frozen=True)
+class Status:
+    """One ``DiagnosticStatus`` as received.
+
+    Attributes:
+        name: status name (the node name).
+        message: its message (the node's state).
+        values: key/value pairs.
+        received_ns: receive time, ``time.monotonic_ns()``.
+    """
+
+    name: str
+    message: str
+    values: dict
+    received_ns: int
+
+    def number(self, key: str) -> float:
+        """A value as a float (NaN when empty or missing)."""
+        text = self.values.get(key, "")
+        try:
+            return float(text)
+        except ValueError:
+            return float("nan")
+
+
+class PipelineClient:
+    """A small rclpy node (own context) to drive and observe the pipeline.
+
+    Args:
+        env: environment whose ``ROS_DOMAIN_ID`` to use (default: this process's, completed by
+            :func:`ensure_ros_isolation`).
+        watch_state: subscribe to ``joint_states`` and ``tool_pose`` now (otherwise on the
+            first :meth:`current_positions` / :meth:`current_tool_pose`: each subscriber costs
+            the 1 kHz publisher a little, so the client only listens when asked).
+        base_frame: frame id put on goals.
+        node_name: this node's name.
+        namespace: the pipeline's namespace (``""``: the root namespace). Topics resolve in
+            it, and node names given to the ``wait_*``/``latest_status`` methods are looked
+            up as ``namespace/name``.
+    """
+
+    def __init__(
+        self,
+        env: Mapping[str, str] | None = None,
+        watch_state: bool = False,
+        base_frame: str = "base_link",
+        node_name: str = "",
+        namespace: str = "",
+    ):
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import JointState
+
+        self._state_types = (JointState, PoseStamped)
+        environ = ensure_ros_isolation() if env is None else env
+        domain = int(environ.get("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0")))
+        # rclpy reads the discovery range from this process's environment.
+        os.environ.setdefault(
+            "ROS_AUTOMATIC_DISCOVERY_RANGE", environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        )
+        self.base_frame = base_frame
+        self._context = rclpy.Context()
+        # No signal handlers: Ctrl-C stays a KeyboardInterrupt for the program using the client.
+        rclpy.init(
+            context=self._context, domain_id=domain, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO
+        )
+        self.namespace = normalize_namespace(namespace)
+        self.node = rclpy.create_node(
+            node_name or f"manip_kin_client_{os.getpid()}", namespace=self.namespace or "/", context=self._context
+        )
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self.node)
+        self._publishers: dict[str, object] = {}
+        self._statuses: dict[str, Status] = {}
+        self.joint_state: JointState | None = None
+        self.tool_pose: PoseStamped | None = None
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
+        self._watching = False
+        if watch_state:
+            self.watch_state()
+        self._closed = False
+
+    def watch_state(self) -> None:
+        """Subscribe to ``joint_states`` and ``tool_pose`` (once)."""
+        if not self._watching:
+            joint_state_type, pose_type = self._state_types
+            self.node.create_subscription(joint_state_type, "joint_states", self._on_joint_state, 1)
+            self.node.create_subscription(pose_type, "tool_pose", self._on_tool_pose, 1)
+            self._watching = True
+
+    # --- plumbing --------------------------------------------------------------------------------
+
+    def now_ns(self) -> int:
+        """``time.monotonic_ns()``: the clock of :attr:`Status.received_ns`."""
+        return time.monotonic_ns()
+
+    def spin_for(self, seconds: float) -> None:
+        """Process incoming messages for ``seconds``."""
+        deadline = time.monotonic() + seconds
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return
+            self._executor.spin_once(timeout_sec=min(remaining, 0.05))
+
+    def spin_until(self, predicate: Callable[[], object], timeout: float):
+        """Spin until ``predicate()`` is truthy (returned) or ``timeout`` passes (returns None)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            value = predicate()
+            if value:
+                return value
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return None
+            self._executor.spin_once(timeout_sec=min(remaining, 0.02))
+
+    def node_names(self) -> list[str]:
+        """Node names currently in the graph."""
+        return self.node.get_node_names()
+
+    def _on_diagnostics(self, msg) -> None:
+        now = time.monotonic_ns()
+        for status in msg.status:
+            entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now)
+            self._statuses[status.name] = entry
+
+    def _on_joint_state(self, msg) -> None:
+        self.joint_state = msg
+
+    def _on_tool_pose(self, msg) -> None:
+        self.tool_pose = msg
+
+    def status_name(self, node_name: str) -> str:
+        """The ``/diagnostics`` status name of node ``node_name`` of this client's namespace."""
+        return status_name(node_name, self.namespace)
+
+    def latest_status(self, name: str) -> Status | None:
+        """Newest ``/diagnostics`` status of node ``name`` (in this namespace) received so far."""
+        return self._statuses.get(self.status_name(name))
+
+    def topic(self, name: str) -> str:
+        """``name`` resolved in this client's namespace (``goal_pose`` → ``/left/goal_pose``)."""
+        return self.node.resolve_topic_name(name)
+
+    def close(self) -> None:
+        """Destroy the node and shut its context down."""
+        if self._closed:
+            return
+        self._closed = True
+        self._executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self._context.try_shutdown()
+
+    def __enter__(self) -> PipelineClient:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # --- publishing ------------------------------------------------------------------------------
+
+    def publisher(self, msg_type, topic: str):
+        """A reliable depth-10 publisher on ``topic`` (relative names resolve in the namespace; created once)."""
+        key = f"{topic}:{msg_type.__name__}"
+        if key not in self._publishers:
+            self._publishers[key] = self.node.create_publisher(msg_type, topic, 10)
+        return self._publishers[key]
+
+    def publish_delivered(self, topic: str, msg, timeout: float = 10.0, subscribers: int = 1) -> int:
+        """Publish ``msg`` once a subscriber is matched, and wait until they acknowledged it.
+
+        Returns:
+            The number of matched subscriptions.
+
+        Raises:
+            PipelineError: no subscriber within ``timeout`` or no acknowledgement.
+        """
+        from rclpy.duration import Duration
+
+        publisher = self.publisher(type(msg), topic)
+
+        def all_matched() -> bool:
+            # Every subscription the graph knows must be matched, not just the first one:
+            # with a recorder running, it may match before the controller does.
+            known = len(self.node.get_subscriptions_info_by_topic(publisher.topic_name))
+            return publisher.get_subscription_count() >= max(subscribers, known)
+
+        matched = self.spin_until(all_matched, timeout)
+        if not matched:
+            raise PipelineError(
+                f"no subscriber on {publisher.topic_name} after {timeout:g} s "
+                "(is the node running, same ROS_DOMAIN_ID and namespace?)"
+            )
+        # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
+        # or a reliable sample can be sent before the reader accepts it.
+        self.spin_for(0.05)
+        publisher.publish(msg)
+        if not publisher.wait_for_all_acked(Duration(seconds=timeout)):
+            raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
+        return publisher.get_subscription_count()
+
+    def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
+        """A ``PoseStamped`` of a 4x4 pose stamped now (the stamp identifies it in /diagnostics)."""
+        from manip_kin.nodes.conversions import make_pose_stamped
+
+        return make_pose_stamped(pose, frame_id or self.base_frame, self.node.get_clock().now().to_msg())
+
+    def send_goal(self, pose: np.ndarray, frame_id: str | None = None, timeout: float = 10.0) -> str:
+        """Publish a goal pose on ``goal_pose``; returns its stamp key (see :meth:`wait_converged`)."""
+        from manip_kin.nodes.conversions import stamp_key
+
+        msg = self.pose_msg(pose, frame_id)
+        self.publish_delivered("goal_pose", msg, timeout)
+        return stamp_key(msg.header.stamp)
+
+    def send_line(self, pose: np.ndarray, frame_id: str | None = None, timeout: float = 10.0) -> str:
+        """Publish a line target on ``line_target``; returns its stamp key (see :meth:`wait_line_done`)."""
+        from manip_kin.nodes.conversions import stamp_key
+
+        msg = self.pose_msg(pose, frame_id)
+        self.publish_delivered("line_target", msg, timeout)
+        return stamp_key(msg.header.stamp)
+
+    # --- waiting ---------------------------------------------------------------------------------
+
+    def wait_status(self, name: str, timeout: float = 10.0, after_ns: int = 0) -> Status:
+        """Wait for a status of node ``name`` (in this namespace) received after ``after_ns``."""
+        key = self.status_name(name)
+        status = self.spin_until(
+            lambda: (s := self._statuses.get(key)) is not None and s.received_ns > after_ns and s, timeout
+        )
+        if status is None:
+            raise PipelineError(f"no /diagnostics from {key} within {timeout:g} s")
+        return status
+
+    def wait_converged(
+        self, goal_stamp: str, timeout: float = 30.0, controller: str = "cartesian_controller"
+    ) -> tuple[bool, Status | None]:
+        """Wait until the controller reports ``converged`` on the goal stamped ``goal_stamp``.
+
+        Returns:
+            ``(converged, last status about that goal)``; the status has ``position_error``
+            [m] and ``orientation_error`` [rad].
+        """
+        last: list[Status | None] = [None]
+        key = self.status_name(controller)
+
+        def done():
+            status = self._statuses.get(key)
+            if status is None or status.values.get("goal_stamp") != goal_stamp:
+                return False
+            last[0] = status
+            return status.message == "converged"
+
+        converged = bool(self.spin_until(done, timeout))
+        return converged, last[0]
+
+    def wait_line_done(
+        self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator"
+    ) -> Status:
+        """Wait until the generator finished (``holding``) or rejected the target ``target_stamp``.
+
+        Returns:
+            The generator's status: ``message`` is ``holding`` (``final_goal_stamp`` set) or
+            ``rejected`` (``last_rejection`` says why; ``rejected_stamp`` is the target's).
+
+        Raises:
+            PipelineError: neither within ``timeout``.
+        """
+
+        key = self.status_name(generator)
+
+        def done():
+            status = self._statuses.get(key)
+            if status is None:
+                return None
+            if status.values.get("rejected_stamp") == target_stamp:
+                return status
+            if status.values.get("target_stamp") == target_stamp and status.message == "holding":
+                return status
+            return None
+
+        status = self.spin_until(done, timeout)
+        if status is None:
+            last = self._statuses.get(key)
+            raise PipelineError(
+                f"line not finished within {timeout:g} s (generator state: {last.message if last else 'no status'})"
+            )
+        return status
+
+    def current_positions(self, timeout: float = 5.0) -> np.ndarray:
+        """Newest ``joint_states`` positions (message order), waiting for one if needed."""
+        self.watch_state()
+        self.joint_state = None
+        msg = self.spin_until(lambda: self.joint_state, timeout)
+        if msg is None:
+            raise PipelineError(f"no {self.topic('joint_states')} within {timeout:g} s")
+        return np.array(msg.position)
+
+    def current_tool_pose(self, timeout: float = 5.0) -> np.ndarray:
+        """Newest ``tool_pose`` as a 4x4 pose, waiting for one if needed."""
+        from manip_kin.nodes.conversions import pose_stamped_to_matrix
+
+        self.watch_state()
+        self.tool_pose = None
+        msg = self.spin_until(lambda: self.tool_pose, timeout)
+        if msg is None:
+            raise PipelineError(f"no {self.topic('tool_pose')} within {timeout:g} s")
+        return pose_stamped_to_matrix(msg)

@@ -1,0 +1,358 @@
+"""Run the manip_kin nodes without ``ros2 launch``: a supervisor of node processes.
+
+:class:`Pipeline` starts node executables as subprocesses with their parameters, waits
+until each one's control loop runs (its first ``/diagnostics`` status), and stops them
+cleanly (SIGINT, then SIGTERM, then SIGKILL after timeouts). Any process can join: a
+:class:`NodeProcess` is an executable name, a node name, a namespace and parameters, so the
+recorder is one more entry in the list (see :func:`pipeline_processes`). A pipeline in a
+namespace (``Pipeline(..., namespace="/left")``) runs every node with ``-r __ns:=/left``, so
+two arms share one domain without seeing each other's topics.
+
+Example::
+
+    with Pipeline(pipeline_processes("genova7", rate_hz=1000), namespace="/left") as pipeline:
+        client = pipeline.client()
+        stamp = client.send_goal(goal_pose)
+        status = client.wait_converged(stamp, timeout=30)
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from manip_kin.pipeline.client import PipelineClient, normalize_namespace, status_name
+from manip_kin.pipeline.domain import ensure_ros_isolation
+from manip_kin.pipeline.errors import PipelineError
+
+#: Node executables of the pipeline, in start order.
+PIPELINE_NODES = ("robot_state", "cartesian_controller", "trajectory_generator")
+
+
+def find_executable(name: str, executable_dir: str | os.PathLike | None = None) -> str:
+    """Path of a node executable: in ``executable_dir`` if given, else next to this Python, else on PATH."""
+    if executable_dir is not None:
+        candidate = Path(executable_dir) / name
+        if candidate.is_file():
+            return str(candidate)
+        raise PipelineError(f"executable {name!r} not found in {executable_dir}")
+    beside = Path(sys.executable).parent / name
+    if beside.is_file():
+        return str(beside)
+    found = shutil.which(name)
+    if found is None:
+        raise PipelineError(f"executable {name!r} not found next to {sys.executable} nor on PATH")
+    return found
+
+
+def _parameter_text(value) -> str:
+    """A parameter value as ``-p name:=value`` text (YAML)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        if len(value) and all(isinstance(v, str) for v in value):
+            return "[" + ", ".join(f"'{v}'" for v in value) + "]"
+        return "[" + ", ".join(repr(float(v)) for v in value) + "]"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+# --- processes -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NodeProcess:
+    """One node executable to run.
+
+    Attributes:
+        executable: console script name (``robot_state``...).
+        node_name: the node's name in the graph.
+        parameters: ``-p name:=value`` pairs.
+        params_file: optional ``--params-file``.
+        remaps: ``-r from:=to`` pairs.
+        ready_status: name of the node whose ``/diagnostics`` status means the node runs
+            ("" = wait only for the node name in the graph); looked up in ``namespace``.
+        namespace: ``-r __ns:=NS`` (``""``: the root namespace, or the :class:`Pipeline`'s).
+    """
+
+    executable: str
+    node_name: str = ""
+    parameters: Mapping[str, object] = field(default_factory=dict)
+    params_file: str | None = None
+    remaps: Mapping[str, str] = field(default_factory=dict)
+    ready_status: str = ""
+    namespace: str = ""
+
+    @property
+    def name(self) -> str:
+        """The node name (the executable name when not set)."""
+        return self.node_name or self.executable
+
+    @property
+    def status_name(self) -> str:
+        """The ``/diagnostics`` status name that means "running" ("" when none)."""
+        return status_name(self.ready_status, self.namespace) if self.ready_status else ""
+
+    def arguments(self) -> list[str]:
+        """The ``--ros-args`` part of the command line."""
+        args = ["--ros-args"]
+        if self.node_name:
+            args += ["-r", f"__node:={self.node_name}"]
+        namespace = normalize_namespace(self.namespace)
+        if namespace:
+            args += ["-r", f"__ns:={namespace}"]
+        for source, target in self.remaps.items():
+            args += ["-r", f"{source}:={target}"]
+        if self.params_file:
+            args += ["--params-file", str(self.params_file)]
+        for key, value in self.parameters.items():
+            args += ["-p", f"{key}:={_parameter_text(value)}"]
+        return args
+
+
+def pipeline_processes(
+    robot: str = "genova7",
+    rate_hz: float = 500.0,
+    initial_positions: Sequence[float] | None = None,
+    controller: Mapping[str, object] | None = None,
+    generator: Mapping[str, object] | None = None,
+    robot_state: Mapping[str, object] | None = None,
+    params_file: str | None = None,
+    realtime_priority: int = 0,
+    model_from_description: bool = False,
+) -> list[NodeProcess]:
+    """The three pipeline nodes for ``robot`` at ``rate_hz``, with extra parameters per node.
+
+    Args:
+        robot: bundled robot name or robot file of robot_state. The controller and the
+            generator get it too, unless ``model_from_description``.
+        rate_hz: loop rate of the three nodes [Hz].
+        initial_positions: start configuration of robot_state (default: the robot's).
+        controller: extra cartesian_controller parameters (gains, tolerances...).
+        generator: extra trajectory_generator parameters (time_scaling, limits...).
+        robot_state: extra robot_state parameters.
+        params_file: a ``--params-file`` given to every node. ROS resolves a key found in the
+            file's node-name section before ``-p`` values (which act like ``/**`` entries), so
+            the file wins for the keys it sets per node.
+        realtime_priority: SCHED_FIFO priority of every node's loop thread (0 = normal
+            scheduling); keeps the loops on time on a busy machine where permitted.
+        model_from_description: the controller and the generator read the model from
+            robot_state's ``robot_description`` instead of a ``robot`` parameter.
+    """
+    common: dict[str, object] = {"rate_hz": float(rate_hz)}
+    if not model_from_description:
+        common["robot"] = robot
+    if realtime_priority:
+        common["realtime_priority"] = int(realtime_priority)
+    state = dict(common, robot=robot, **(robot_state or {}))
+    if initial_positions is not None:
+        state["initial_positions"] = [float(v) for v in initial_positions]
+    return [
+        NodeProcess("robot_state", "robot_state", state, params_file, ready_status="robot_state"),
+        NodeProcess(
+            "cartesian_controller",
+            "cartesian_controller",
+            dict(common, **(controller or {})),
+            params_file,
+            ready_status="cartesian_controller",
+        ),
+        NodeProcess(
+            "trajectory_generator",
+            "trajectory_generator",
+            dict(common, **(generator or {})),
+            params_file,
+            ready_status="trajectory_generator",
+        ),
+    ]
+
+
+class Pipeline:
+    """Node processes started together and stopped together.
+
+    Args:
+        processes: what to run, in start order.
+        executable_dir: where the executables are (e.g. ``install/manip_kin/lib/manip_kin``);
+            default: next to this Python, else PATH.
+        env: environment of the children (default: this process's, completed by
+            :func:`ensure_ros_isolation`).
+        log_dir: where each process's output goes (``NAME.log``); default: a temp dir.
+        namespace: every process that sets none runs in this namespace (``-r __ns:=NS``),
+            and :meth:`client` talks to it.
+    """
+
+    def __init__(
+        self,
+        processes: Iterable[NodeProcess],
+        executable_dir: str | os.PathLike | None = None,
+        env: Mapping[str, str] | None = None,
+        log_dir: str | os.PathLike | None = None,
+        namespace: str = "",
+    ):
+        self.namespace = normalize_namespace(namespace)
+        self.processes = {
+            spec.name: spec if spec.namespace else replace(spec, namespace=self.namespace) for spec in processes
+        }
+        self.executable_dir = executable_dir
+        self.env = ensure_ros_isolation(dict(env) if env is not None else None)
+        if env is None:
+            self.env = dict(self.env)
+        self.env.setdefault("PYTHONUNBUFFERED", "1")
+        self.log_dir = Path(log_dir) if log_dir else Path(tempfile.mkdtemp(prefix="manip_kin_pipeline_"))
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self._popen: dict[str, subprocess.Popen] = {}
+        self._logs: dict[str, object] = {}
+        self._client: PipelineClient | None = None
+
+    # --- lifecycle ---------------------------------------------------------------------------
+
+    def start(self, timeout: float = 30.0) -> Pipeline:
+        """Start every process and wait until each runs; stops them all on failure."""
+        try:
+            for name in self.processes:
+                self.start_process(name)
+            self.wait_ready(list(self.processes), timeout)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def start_process(self, name: str) -> subprocess.Popen:
+        """Start (or restart) one process by node name; does not wait for it."""
+        spec = self.processes[name]
+        old = self._popen.get(name)
+        if old is not None and old.poll() is None:
+            raise PipelineError(f"{name} is already running (pid {old.pid})")
+        command = [find_executable(spec.executable, self.executable_dir)] + spec.arguments()
+        log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed in stop
+        log.write(f"$ {' '.join(command)}\n".encode())
+        log.flush()
+        self._logs[name] = log
+        self._popen[name] = subprocess.Popen(
+            command, env=self.env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+        )
+        return self._popen[name]
+
+    def wait_ready(self, names: Sequence[str], timeout: float = 30.0) -> None:
+        """Wait until each named process publishes its ready status (or appears in the graph).
+
+        Raises:
+            PipelineError: a process exited, or the timeout passed; the message has its log tail.
+        """
+        client = self.client()
+        deadline = time.monotonic() + timeout
+        started = {name: client.now_ns() for name in names}
+        waiting = list(names)
+        while waiting:
+            for name in list(waiting):
+                popen = self._popen.get(name)
+                if popen is None or popen.poll() is not None:
+                    code = None if popen is None else popen.returncode
+                    raise PipelineError(f"{name} exited with code {code} during start:\n{self.log_tail(name)}")
+                spec = self.processes[name]
+                if spec.ready_status:
+                    status = client.latest_status(spec.status_name)
+                    if status is not None and status.received_ns >= started[name]:
+                        waiting.remove(name)
+                elif name in client.node_names():
+                    waiting.remove(name)
+            if not waiting:
+                break
+            if time.monotonic() > deadline:
+                tails = "\n".join(f"--- {n} ---\n{self.log_tail(n)}" for n in waiting)
+                raise PipelineError(f"not ready after {timeout:g} s: {', '.join(waiting)}\n{tails}")
+            client.spin_for(0.05)
+
+    def stop_process(self, name: str, timeout: float = 5.0, sig: int | None = signal.SIGINT) -> int | None:
+        """Stop one process: ``sig`` (SIGINT), then SIGTERM, then SIGKILL; returns its exit code.
+
+        ``sig=None`` only waits ``timeout`` before escalating (the caller already signalled).
+        """
+        popen = self._popen.get(name)
+        if popen is None:
+            return None
+        if popen.poll() is None:
+            for signal_number, wait in ((sig, timeout), (signal.SIGTERM, 2.0), (signal.SIGKILL, 5.0)):
+                try:
+                    if signal_number is not None:
+                        popen.send_signal(signal_number)
+                except ProcessLookupError:
+                    break
+                try:
+                    popen.wait(wait)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+        log = self._logs.pop(name, None)
+        if log is not None:
+            log.close()
+        return popen.returncode
+
+    def kill_process(self, name: str) -> int | None:
+        """SIGKILL one process at once (a crash) and reap it."""
+        return self.stop_process(name, timeout=5.0, sig=signal.SIGKILL)
+
+    def restart_process(self, name: str, timeout: float = 30.0) -> None:
+        """Start a stopped process again and wait until it runs."""
+        self.start_process(name)
+        self.wait_ready([name], timeout)
+
+    def stop(self, timeout: float = 5.0) -> dict[str, int | None]:
+        """Stop every process (reverse start order) and the client; returns exit codes by name."""
+        codes = {}
+        # Signal all first so they stop in parallel, then collect.
+        for name in reversed(list(self._popen)):
+            popen = self._popen[name]
+            if popen.poll() is None:
+                try:
+                    popen.send_signal(signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+        for name in reversed(list(self._popen)):
+            codes[name] = self.stop_process(name, timeout, sig=None)
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+        return codes
+
+    def __enter__(self) -> Pipeline:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # --- inspection -----------------------------------------------------------------------------
+
+    def pid(self, name: str) -> int:
+        """Process id of a running node."""
+        return self._popen[name].pid
+
+    def running(self, name: str) -> bool:
+        """True while the process runs."""
+        popen = self._popen.get(name)
+        return popen is not None and popen.poll() is None
+
+    def log_text(self, name: str) -> str:
+        """Everything the process printed so far."""
+        path = self.log_dir / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def log_tail(self, name: str, lines: int = 30) -> str:
+        """The last ``lines`` lines the process printed."""
+        return "\n".join(self.log_text(name).splitlines()[-lines:])
+
+    def client(self) -> PipelineClient:
+        """The pipeline's own :class:`PipelineClient` (created on first use, closed by :meth:`stop`)."""
+        if self._client is None:
+            self._client = PipelineClient(env=self.env, namespace=self.namespace)
+        return self._client
