@@ -227,6 +227,10 @@ class LineTrajectory:
         """Total time [s]."""
         return self.scaling.duration
 
+    def progress_at(self, t: float) -> float:
+        """Progress ``s ∈ [0, 1]`` at time ``t`` [s] from the start."""
+        return self.scaling.evaluate(t)[0]
+
     def pose_at(self, progress: float) -> np.ndarray:
         """The pose at progress ``s ∈ [0, 1]``, shape (4, 4)."""
         pose = np.eye(4)

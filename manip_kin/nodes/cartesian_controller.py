@@ -24,11 +24,12 @@ from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.runner import run_node
 from manip_kin.robots import load_robot
+from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
 
 NODE_NAME = "cartesian_controller"
 
 #: Controller states reported as the DiagnosticStatus message and the ``state`` value.
-STATES = ("idle", "tracking", "converged", "singular", "joint-limited", "stale input")
+STATES = tuple(state.value for state in ControllerState)
 
 PARAMETERS = (
     ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file"),
@@ -123,7 +124,8 @@ USAGE = usage_text(
 
 
 class CartesianControllerNode(LoopingNode):
-    """ROS handles around one :class:`~manip_kin.control.CartesianController`."""
+    """ROS handles around one :class:`~manip_kin.control.CartesianController` and its
+    :class:`~manip_kin.supervisors.ControllerSupervisor` (states, timeouts, convergence)."""
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
@@ -143,13 +145,21 @@ class CartesianControllerNode(LoopingNode):
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
         self.dt = 1.0 / self.rate_hz
-        self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
-        self._goal_timeout_ns = int(params["goal_timeout"] * 1e9)
-        self._twist_timeout_ns = int(params["goal_twist_timeout"] * 1e9)
+        self.supervisor = ControllerSupervisor(
+            ControllerSupervisorConfig(
+                joint_state_timeout=params["joint_state_timeout"],
+                goal_timeout=params["goal_timeout"],
+                goal_twist_timeout=params["goal_twist_timeout"],
+                position_tolerance=params["position_tolerance"],
+                orientation_tolerance=params["orientation_tolerance"],
+                task=self.controller.task,
+            ),
+            self.model.joint_names,
+            int(1e9 / params["diagnostics_rate_hz"]),
+        )
         self.position_tolerance = params["position_tolerance"]
         self.orientation_tolerance = params["orientation_tolerance"]
         self._quaternion_tolerance = params["quaternion_tolerance"]
-        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
 
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
         self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
@@ -161,28 +171,31 @@ class CartesianControllerNode(LoopingNode):
         self._joint_states = conv.JointStateDecoder(self.model.joint_names)
 
         self.q: np.ndarray | None = None
-        self._q_time_ns = 0
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
-        self._goal_time_ns = 0
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
-        self._twist_moving = False
-        self._twist_time_ns = 0
-        self.state = "idle"
-        self.detail = "no goal yet"
         self.output: ControlOutput | None = None
         self.rejected_goals = 0
         self.rejected_twists = 0
         self.rejected_joint_states = 0
-        self._last_diagnostics_ns = 0
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
 
         self.get_logger().info(
             f"robot {self.model.name}: controlling frame {self.model.frame_name(self.controller.frame_index)!r} "
             f"at {self.rate_hz:g} Hz, gains {config.gain_angular:g}/{config.gain_linear:g} 1/s, "
-            f"goals in frame {self.base_frame!r}"
+            f"goals in frame {self.base_frame!r}, task {self.controller.task.name}"
         )
         self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+
+    @property
+    def state(self) -> ControllerState:
+        """The current state (see :class:`~manip_kin.supervisors.ControllerState`)."""
+        return self.supervisor.state
+
+    @property
+    def detail(self) -> str:
+        """One line on the current state."""
+        return self.supervisor.detail
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -191,7 +204,7 @@ class CartesianControllerNode(LoopingNode):
         while (data := self._joint_state_sub.take(raw=True)) is not None:
             try:
                 self.q = self._joint_states.positions(data)
-                self._q_time_ns = now_ns
+                self.supervisor.joint_state_received(now_ns)
             except conv.InvalidMessageError as error:
                 self.rejected_joint_states += 1
                 self._warn(
@@ -209,7 +222,7 @@ class CartesianControllerNode(LoopingNode):
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
             self.goal_stamp = conv.stamp_key(msg.header.stamp)
-            self._goal_time_ns = now_ns
+            self.supervisor.goal_received(now_ns, GoalKind.POSE)
         while (msg := self._twist_sub.take()) is not None:
             problem = conv.twist_problem(msg, self.base_frame, "goal twist")
             if problem is not None:
@@ -221,61 +234,32 @@ class CartesianControllerNode(LoopingNode):
                 continue
             angular, linear = conv.twist_to_arrays(msg.twist)
             self._twist = (angular, linear)
-            self._twist_moving = bool(angular.any() or linear.any())
-            self._twist_time_ns = now_ns
+            self.supervisor.twist_received(now_ns, bool(angular.any() or linear.any()))
 
     # --- the cycle -------------------------------------------------------------------------------
 
     def _cycle(self, now_ns: int) -> None:
         self._take_inputs(now_ns)
+        supervisor = self.supervisor
         qdot = self._zeros
-        previous_state = self.state
-        if self.q is None:
-            self.state, self.detail = "stale input", "no joint state yet"
-        elif now_ns - self._q_time_ns > self._joint_state_timeout_ns:
-            self.state, self.detail = "stale input", f"joint state {(now_ns - self._q_time_ns) * 1e-9:.2f} s old"
-        elif self.goal is None:
-            self.state, self.detail = "idle", "no goal yet"
-        elif self._goal_timeout_ns and now_ns - self._goal_time_ns > self._goal_timeout_ns:
-            self.state, self.detail = "stale input", f"goal {(now_ns - self._goal_time_ns) * 1e-9:.2f} s old"
-        else:
-            twist_fresh = self._twist is not None and now_ns - self._twist_time_ns <= self._twist_timeout_ns
+        if supervisor.gate(now_ns):
+            twist_fresh = supervisor.feed_forward_fresh(now_ns)
             try:
                 output = self.controller.step(self.q, self.goal, self._twist if twist_fresh else None, self.dt)
             except ManipKinError as error:
-                self.state, self.detail = "stale input", f"control step failed: {error}"
+                supervisor.step_failed(error)
                 self._warn("step", f"control step failed, publishing zeros: {error}")
             else:
                 self.output = output
                 qdot = output.qdot
-                self.state, self.detail = self._classify(output, twist_fresh and self._twist_moving)
+                supervisor.pose_step_done(output, twist_fresh)
         self._command_pub.publish(self._command_cdr.encode(qdot))
-        since = now_ns - self._last_diagnostics_ns
-        # A state change is reported at once, but at most every 20 ms: near a limit the state
-        # can flicker cycle to cycle, and a status costs ~0.2 ms to build.
-        if since >= self._diagnostics_period_ns or (self.state != previous_state and since >= 20_000_000):
-            self._last_diagnostics_ns = now_ns
+        if supervisor.report_due(now_ns):
             self._publish_diagnostics(now_ns)
-
-    def _classify(self, output: ControlOutput, goal_moving: bool) -> tuple[str, str]:
-        position_error = output.position_error_norm
-        orientation_error = output.orientation_error_norm
-        if (
-            not goal_moving
-            and position_error <= self.position_tolerance
-            and orientation_error <= self.orientation_tolerance
-        ):
-            return "converged", "goal reached within tolerance"
-        if output.singular:
-            return "singular", f"manipulability {output.manipulability:.3g}, damping {output.damping:.3g}"
-        if output.limited_joints:
-            names = [self.model.joint_names[i] for i in output.limited_joints]
-            return "joint-limited", f"joints at a position limit: {', '.join(names)}"
-        return "tracking", "moving towards the goal"
 
     def _publish_diagnostics(self, now_ns: int) -> None:
         output = self.output
-        active = self.state not in ("idle", "stale input") and output is not None
+        active = self.supervisor.active and output is not None
         values = [
             ("state", self.state),
             ("detail", self.detail),
@@ -293,8 +277,9 @@ class CartesianControllerNode(LoopingNode):
             ("rejected_twists", str(self.rejected_twists)),
             ("rejected_joint_states", str(self.rejected_joint_states)),
         ] + stats_key_values(self.loop.stats())
-        level = {"stale input": "warn", "singular": "warn", "joint-limited": "ok"}.get(self.state, "ok")
-        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
+        status = conv.make_diagnostic_status(
+            self.status_name, self.supervisor.level, self.state, self.model.name, values
+        )
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
 

@@ -28,12 +28,13 @@ from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.runner import run_node
 from manip_kin.robots import load_robot
+from manip_kin.supervisors import GeneratorState, GeneratorSupervisor
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, check_line_reachable
 
 NODE_NAME = "trajectory_generator"
 
 #: States reported on /diagnostics.
-STATES = ("idle", "streaming", "holding", "rejected")
+STATES = tuple(state.value for state in GeneratorState)
 
 PARAMETERS = (
     ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file (for the reach check)"),
@@ -121,7 +122,7 @@ USAGE = usage_text(
 
 
 class TrajectoryGeneratorNode(LoopingNode):
-    """ROS handles around the running :class:`~manip_kin.trajectory.LineTrajectory`."""
+    """ROS handles around a :class:`~manip_kin.supervisors.GeneratorSupervisor` and the motion it runs."""
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
@@ -140,7 +141,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._path_points = max(2, params["path_points"])
-        self._diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
@@ -160,17 +161,6 @@ class TrajectoryGeneratorNode(LoopingNode):
 
         self._tool_pose_msg: PoseStamped | None = None
         self._joint_state_msg: JointState | None = None
-        self.line: LineTrajectory | None = None
-        self._line_start_ns = 0
-        self.state = "idle"
-        self.detail = "no target yet"
-        self.target_stamp = ""
-        self.final_goal_stamp = ""
-        self.progress = 0.0
-        self.rejected_targets = 0
-        self.rejected_stamp = ""
-        self.last_rejection = ""
-        self._last_diagnostics_ns = 0
         self._warn = ThrottledLog(self.get_logger().warning, 0.5)
         self._error = ThrottledLog(self.get_logger().error, 0.5)
 
@@ -179,6 +169,21 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"{self.limits.max_angular_velocity:g} rad/s, streamed at {self.rate_hz:g} Hz"
         )
         self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+
+    @property
+    def state(self) -> GeneratorState:
+        """The current state (see :class:`~manip_kin.supervisors.GeneratorState`)."""
+        return self.supervisor.state
+
+    @property
+    def rejected_targets(self) -> int:
+        """Targets rejected since the start."""
+        return self.supervisor.rejected_targets
+
+    @property
+    def last_rejection(self) -> str:
+        """Why the last target was rejected."""
+        return self.supervisor.last_rejection
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -194,17 +199,11 @@ class TrajectoryGeneratorNode(LoopingNode):
         return target
 
     def _reject(self, msg: PoseStamped, reason: str) -> None:
-        self.rejected_targets += 1
-        self.last_rejection = reason
-        # A rejected target does not replace the running line's target_stamp.
-        self.rejected_stamp = conv.stamp_key(msg.header.stamp)
-        kept = "the running line goes on" if self.state == "streaming" else "nothing to do"
+        kept = self.supervisor.reject(reason, conv.stamp_key(msg.header.stamp))
         self._error(
             "target:" + conv.problem_kind(reason),
             f"rejected {self._target_sub.subscription.topic_name}: {reason}; {kept}",
         )
-        if self.state != "streaming":
-            self.state, self.detail = "rejected", reason
 
     # --- planning ----------------------------------------------------------------------------------
 
@@ -246,18 +245,11 @@ class TrajectoryGeneratorNode(LoopingNode):
         except ManipKinError as error:
             self._reject(target_msg, str(error))
             return False
-        preempted = self.state == "streaming"
-        self.line = line
-        self._line_start_ns = now_ns
-        self.target_stamp = conv.stamp_key(target_msg.header.stamp)
-        self.final_goal_stamp = ""
-        self.state, self.detail = (
-            "streaming",
-            f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s",
-        )
+        detail = f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
+        preempted = self.supervisor.start(line, "line", now_ns, conv.stamp_key(target_msg.header.stamp), detail)
         self.get_logger().info(
-            f"{'pre-empted the running line; ' if preempted else ''}streaming a {self.time_scaling} line "
-            f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {self.detail}"
+            f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.time_scaling} line "
+            f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {detail}"
         )
         self._publish_path(line)
         return True
@@ -276,46 +268,41 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     def _cycle(self, now_ns: int) -> None:
         target = self._take_inputs(now_ns)
-        previous_state = self.state
+        supervisor = self.supervisor
         if target is not None:
             self._plan(target, now_ns)
-        if self.state == "streaming" and self.line is not None:
-            elapsed = (now_ns - self._line_start_ns) * 1e-9
-            line = self.line
-            finished = elapsed >= line.duration
-            pose, (angular, linear) = line.sample(min(elapsed, line.duration) if not finished else line.duration)
+        timing = supervisor.time_into_motion(now_ns)
+        if timing is not None:
+            t, finished = timing
+            pose, (angular, linear) = supervisor.motion.sample(t)
             stamp_ns = self.get_clock().now().nanoseconds
-            self.progress = line.scaling.evaluate(elapsed)[0] if not finished else 1.0
             self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
             self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
             if finished:
-                self.final_goal_stamp = conv.stamp_key(conv.ns_to_stamp(stamp_ns))
-                self.state, self.detail = "holding", "line finished, final pose sent"
-                self.get_logger().info(f"line finished after {elapsed:.3f} s; holding the final pose")
-        since = now_ns - self._last_diagnostics_ns
-        # A state change is reported at once, but at most every 20 ms: near a limit the state
-        # can flicker cycle to cycle, and a status costs ~0.2 ms to build.
-        if since >= self._diagnostics_period_ns or (self.state != previous_state and since >= 20_000_000):
-            self._last_diagnostics_ns = now_ns
+                supervisor.finish(conv.stamp_key(conv.ns_to_stamp(stamp_ns)))
+                self.get_logger().info(f"line finished after {t:.3f} s; holding the final pose")
+        if supervisor.report_due(now_ns):
             self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
-        line = self.line
+        supervisor = self.supervisor
+        motion = supervisor.motion
         values = [
-            ("state", self.state),
-            ("detail", self.detail),
-            ("target_stamp", self.target_stamp),
-            ("final_goal_stamp", self.final_goal_stamp),
-            ("progress", f"{self.progress:.4f}"),
-            ("duration", f"{line.duration:.4f}" if line is not None else ""),
-            ("length", f"{line.length:.6f}" if line is not None else ""),
+            ("state", supervisor.state),
+            ("detail", supervisor.detail),
+            ("target_stamp", supervisor.target_stamp),
+            ("final_goal_stamp", supervisor.final_goal_stamp),
+            ("progress", f"{supervisor.progress:.4f}"),
+            ("duration", f"{motion.duration:.4f}" if motion is not None else ""),
+            ("length", f"{motion.length:.6f}" if motion is not None else ""),
             ("time_scaling", self.time_scaling),
-            ("rejected_targets", str(self.rejected_targets)),
-            ("rejected_stamp", self.rejected_stamp),
-            ("last_rejection", self.last_rejection),
+            ("rejected_targets", str(supervisor.rejected_targets)),
+            ("rejected_stamp", supervisor.rejected_stamp),
+            ("last_rejection", supervisor.last_rejection),
         ] + stats_key_values(self.loop.stats())
-        level = "warn" if self.state == "rejected" else "ok"
-        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
+        status = conv.make_diagnostic_status(
+            self.status_name, supervisor.level, supervisor.state, self.model.name, values
+        )
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
 
