@@ -24,6 +24,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
 SECTIONS = ("core", "motion", "nodes", "recorder")
 
@@ -58,7 +59,9 @@ def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int 
 
 def panda_model():
     """The 7-DoF Franka Panda URDF from example-robot-data (tip: the hand)."""
-    from manip_kin.urdf import example_robot_data_urdf, load_urdf
+    from robot_data_files import example_robot_data_urdf
+
+    from manip_kin.urdf import load_urdf
 
     return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"), tip_link="panda_hand")
 
@@ -110,7 +113,8 @@ def _timed(function) -> float:
 
 
 def bench_motion(repeats: int, ik_targets: int) -> list[dict]:
-    from manip_kin.benchmarks_motion import benchmark_control_step, benchmark_ik
+    from bench_motion import benchmark_control_step, benchmark_ik
+
     from manip_kin.robots import load_robot
 
     rows = []

@@ -191,13 +191,15 @@ def step_source(
             lines.append(f"    if not ({' and '.join(inside)}):")
             lines.append("        return None")
     lines.append("    S = 1.0")
-    if inverse_velocity_limits is not None:
+    # A joint without a velocity limit (inverse 0: the URDF gave none) takes no part.
+    limited = [] if inverse_velocity_limits is None else [j for j in range(n) if inverse_velocity_limits[j] > 0.0]
+    if limited:
         # Comparisons only in the common case; the scale is computed when some rate exceeds.
-        limits = [1.0 / float(inverse_velocity_limits[j]) for j in range(n)]
-        exceeds = " or ".join(f"QD{j} > {limits[j]!r} or QD{j} < {-limits[j]!r}" for j in range(n))
-        worst = ", ".join(f"abs(QD{j})*{float(inverse_velocity_limits[j])!r}" for j in range(n))
+        limits = {j: 1.0 / float(inverse_velocity_limits[j]) for j in limited}
+        exceeds = " or ".join(f"QD{j} > {limits[j]!r} or QD{j} < {-limits[j]!r}" for j in limited)
+        worst = ", ".join(f"abs(QD{j})*{float(inverse_velocity_limits[j])!r}" for j in limited)
         lines.append(f"    if {exceeds}:")
-        lines.append(f"        S = 1.0 / max({worst}{', 0.0' if n == 1 else ''})")
+        lines.append(f"        S = 1.0 / max({worst}{', 0.0' if len(limited) == 1 else ''})")
         lines.append(f"        {', '.join(f'QD{j}' for j in range(n))}, = {', '.join(f'QD{j} * S' for j in range(n))},")
     # The ControlOutput is filled through __dict__ (it is a frozen dataclass; its __init__
     # would set each field through object.__setattr__, several times slower).

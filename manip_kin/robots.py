@@ -8,12 +8,14 @@ checkout (also what ``pip install -e`` gives), and under ``<prefix>/share/manip_
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 import os
 import sys
 from pathlib import Path
 
-from manip_kin.errors import UnknownRobotError
+from manip_kin.errors import InvalidArgumentError, UnknownRobotError
 from manip_kin.model import RobotModel
 
 PACKAGE = "manip_kin"
@@ -57,13 +59,19 @@ def bundled_robot_names() -> list[str]:
     return list(bundled_robot_files())
 
 
+def is_urdf_path(path: str | os.PathLike) -> bool:
+    """True for a ``.urdf`` or ``.xml`` file name."""
+    return Path(path).suffix.lower() in (".urdf", ".xml")
+
+
 @functools.lru_cache(maxsize=32)
-def _load_cached(key: str, mtime: float) -> RobotModel:
+def _load_cached(key: str, mtime: float, links: tuple[str | None, str | None, str | None]) -> RobotModel:
     path = Path(key)
-    if path.suffix.lower() in (".urdf", ".xml"):
+    if is_urdf_path(path):
         from manip_kin.urdf import load_urdf
 
-        return load_urdf(path)
+        base_link, tip_link, tool_link = links
+        return load_urdf(path, base_link=base_link, tip_link=tip_link, tool_link=tool_link)
     from manip_kin.loaders import load_robot_yaml
 
     return load_robot_yaml(path)
@@ -81,10 +89,62 @@ def resolve_robot_path(robot: str | os.PathLike) -> Path:
     raise UnknownRobotError(text, bundled)
 
 
-def load_robot(robot: str | os.PathLike) -> RobotModel:
+def load_robot(
+    robot: str | os.PathLike,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    tool_link: str | None = None,
+) -> RobotModel:
     """Load a bundled robot by name, or a robot YAML or URDF file by path.
 
+    Args:
+        robot: bundled name or file path.
+        base_link, tip_link, tool_link: the chain of a URDF (see :mod:`manip_kin.urdf`);
+            None or "" = the default. A robot YAML names its own chain, so they must be
+            unset for one.
+
     Models are immutable, so repeated loads of an unchanged file return the same object.
+
+    Raises:
+        UnknownRobotError: neither a bundled name nor a robot file.
+        InvalidArgumentError: links given for a robot YAML.
+        ModelFileError: a malformed file, or links that do not make a chain.
     """
     path = resolve_robot_path(robot)
-    return _load_cached(str(path), path.stat().st_mtime)
+    links = (base_link or None, tip_link or None, tool_link or None)
+    if any(links) and not is_urdf_path(path):
+        given = ", ".join(f"{name}={value!r}" for name, value in zip(LINK_PARAMETERS, links) if value)
+        raise InvalidArgumentError(
+            f"{given} given for robot {str(robot)!r}, which is not a URDF; valid: link names select the chain "
+            "of a .urdf file only (a robot YAML lists its own joints)"
+        )
+    return _load_cached(str(path), path.stat().st_mtime, links)
+
+
+#: The chain-selecting parameter names, in (base, tip, tool) order.
+LINK_PARAMETERS = ("base_link", "tip_link", "tool_link")
+
+
+def with_velocity_limits(model: RobotModel, limits) -> RobotModel:
+    """``model`` with every joint's velocity limit replaced by ``limits`` [rad/s | m/s], shape (n,).
+
+    For a URDF that gives no limits (velocity missing or 0), or to run slower than it says.
+
+    Raises:
+        InvalidArgumentError: not one positive number per joint.
+    """
+    values = [float(v) for v in limits]
+    if len(values) != model.dof:
+        raise InvalidArgumentError(
+            f"velocity_limits has {len(values)} values; valid: one per joint, {model.dof} for {model.name} "
+            f"({', '.join(model.joint_names)})"
+        )
+    bad = [
+        f"{name}={value:g}"
+        for name, value in zip(model.joint_names, values)
+        if not (value > 0 and not math.isnan(value))
+    ]
+    if bad:
+        raise InvalidArgumentError(f"velocity_limits {', '.join(bad)}; valid: speeds > 0 [rad/s | m/s]")
+    joints = tuple(dataclasses.replace(joint, velocity_limit=value) for joint, value in zip(model.joints, values))
+    return dataclasses.replace(model, joints=joints)

@@ -165,6 +165,15 @@ class ControllerSupervisor:
         self._twist_moving = False
         self._reference_moving = False
 
+    def reconfigure(self, config: ControllerSupervisorConfig, diagnostics_period_ns: int) -> None:
+        """New timeouts, tolerances and status period from the next cycle on (live tuning); the
+        state and the inputs' ages are kept."""
+        self._joint_state_timeout_ns = int(config.joint_state_timeout * 1e9)
+        self._goal_timeout_ns = int(config.goal_timeout * 1e9)
+        self._twist_timeout_ns = int(config.goal_twist_timeout * 1e9)
+        self.config = config
+        self.throttle.period_ns = int(diagnostics_period_ns)
+
     # --- events ------------------------------------------------------------------------------
 
     def joint_state_received(self, now_ns: int) -> None:

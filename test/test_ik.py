@@ -44,7 +44,9 @@ def task_errors(model, q, target, rows) -> tuple[float, float]:
 
 def panda():
     """The Franka Panda from example-robot-data (a test dependency)."""
-    from manip_kin.urdf import example_robot_data_urdf, load_urdf
+    from robot_data_files import example_robot_data_urdf
+
+    from manip_kin.urdf import load_urdf
 
     return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"))
 

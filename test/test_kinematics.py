@@ -37,7 +37,9 @@ ROBOTS = ["genova7", "mocom7", "irb120", "rpp", "scara"]
 
 
 def _panda():
-    from manip_kin.urdf import example_robot_data_urdf, load_urdf
+    from robot_data_files import example_robot_data_urdf
+
+    from manip_kin.urdf import load_urdf
 
     return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"), tip_link="panda_hand")
 

@@ -76,7 +76,10 @@ def test_help_lists_parameters_topics_and_example(executable):
     result = subprocess.run([str(path), "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0
     text = result.stdout
-    assert "rate_hz (default 500.0) [Hz]" in text and "robot (default 'genova7')" in text
+    # robot_state simulates genova7 by default; the others read the URDF on robot_description.
+    robot_default = "'genova7'" if executable == "robot_state" else "''"
+    assert "rate_hz (default 500.0) [Hz]" in text and f"robot (default {robot_default})" in text
+    assert "tip_link (default '')" in text and "Settable at run time" in text
     assert "--ros-args -p robot:=" in text and "Subscribes:" in text and "Publishes:" in text
 
 

@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from robot_data_files import example_robot_data_urdf
 
 from manip_kin.errors import ModelFileError
 from manip_kin.kinematics import frame_pose, frame_poses
 from manip_kin.model import Joint, JointType, RobotModel
-from manip_kin.urdf import example_robot_data_urdf, load_urdf, load_urdf_string, model_to_urdf
+from manip_kin.urdf import load_urdf, load_urdf_string, model_to_urdf
 
 DATA = Path(__file__).parent / "data"
 SMALL_ARM = DATA / "small_arm.urdf"
@@ -553,7 +554,12 @@ _ERROR_CASES = {
         "base_link",
         "several root links",
     ),
-    "no-velocity": (_two_joints(limit='lower="-1" upper="1"'), {}, "joint[j2]/limit@velocity", "missing"),
+    "negative-velocity": (
+        _two_joints(limit='lower="-1" upper="1" velocity="-1"'),
+        {},
+        "joint[j2]/limit@velocity",
+        "valid: a speed >= 0",
+    ),
     "inverted-limits": (
         _two_joints(limit='lower="1" upper="-1" velocity="1"'),
         {},

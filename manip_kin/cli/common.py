@@ -15,12 +15,28 @@ from manip_kin.rotations import make_transform, matrix_to_quat, matrix_to_rpy, q
 
 
 def add_robot_argument(parser: argparse.ArgumentParser) -> None:
-    """``--robot NAME|FILE``."""
+    """``--robot NAME|FILE`` and, for a URDF, ``--base-link``, ``--tip-link``, ``--tool-link``."""
     parser.add_argument(
         "--robot",
         required=True,
         metavar="NAME|FILE",
         help=f"bundled robot ({', '.join(bundled_robot_names())}) or a robot .yaml/.urdf path",
+    )
+    parser.add_argument(
+        "--base-link", metavar="LINK", default=None, help="URDF only: first link of the chain (default: the root link)"
+    )
+    parser.add_argument(
+        "--tip-link",
+        metavar="LINK",
+        default=None,
+        help="URDF only: last link of the chain, the end effector 'ee' (default: where the unbranched chain "
+        "below the base ends; required when the tree branches into several arms)",
+    )
+    parser.add_argument(
+        "--tool-link",
+        metavar="LINK",
+        default=None,
+        help="URDF only: a link below the tip, joined by fixed joints, used as the tool frame (default: none)",
     )
 
 
@@ -80,8 +96,21 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def robot_from_args(args: argparse.Namespace) -> RobotModel:
-    """The model named by ``--robot``."""
-    return load_robot(args.robot)
+    """The model named by ``--robot`` (the chain of ``--base-link``/``--tip-link``/``--tool-link``).
+
+    A URDF joint without a velocity limit is reported on stderr, once: it is not limited.
+    """
+    from manip_kin.urdf import joints_without_velocity_limit
+
+    model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_link=args.tool_link)
+    unlimited = joints_without_velocity_limit(model)
+    if unlimited:
+        print(
+            f"manip_kin: warning: {model.source or args.robot} gives no velocity limit for {', '.join(unlimited)}; "
+            "those joints are not speed-limited",
+            file=sys.stderr,
+        )
+    return model
 
 
 def joints_from_args(model: RobotModel, values, what: str = "--q") -> np.ndarray:

@@ -20,10 +20,10 @@ from std_msgs.msg import Float64MultiArray
 from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.errors import ManipKinError
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
+from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
-from manip_kin.robots import load_robot
 from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
 
 NODE_NAME = "cartesian_controller"
@@ -32,10 +32,10 @@ NODE_NAME = "cartesian_controller"
 STATES = tuple(state.value for state in ControllerState)
 
 PARAMETERS = (
-    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file"),
+    *model_parameters(""),
     ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
-    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0),
-    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0),
+    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0, tunable=True),
+    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0, tunable=True),
     ParamSpec(
         "frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"
     ),
@@ -45,13 +45,32 @@ PARAMETERS = (
         "",
         "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)",
     ),
-    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0),
-    ParamSpec("singular_threshold", "float", 0.02, "smallest singular value below which damping rises", positive=True),
-    ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits"),
-    ParamSpec("respect_position_limits", "bool", True, "redistribute the task over joints not at a position limit"),
+    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0, tunable=True),
+    ParamSpec(
+        "singular_threshold",
+        "float",
+        0.02,
+        "smallest singular value below which damping rises",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits", tunable=True),
+    ParamSpec(
+        "respect_position_limits",
+        "bool",
+        True,
+        "redistribute the task over joints not at a position limit",
+        tunable=True,
+    ),
     ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
     ParamSpec(
-        "joint_state_timeout", "float", 0.1, "no joint state for longer than this: publish zeros", "s", positive=True
+        "joint_state_timeout",
+        "float",
+        0.1,
+        "no joint state for longer than this: publish zeros",
+        "s",
+        positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "goal_timeout",
@@ -60,6 +79,7 @@ PARAMETERS = (
         "a goal older than this is dropped and zeros published (0 = goals never expire)",
         "s",
         minimum=0.0,
+        tunable=True,
     ),
     ParamSpec(
         "goal_twist_timeout",
@@ -68,17 +88,33 @@ PARAMETERS = (
         "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)",
         "s",
         positive=True,
+        tunable=True,
     ),
     ParamSpec(
-        "position_tolerance", "float", 1e-4, "converged when the position error is below this", "m", positive=True
+        "position_tolerance",
+        "float",
+        1e-4,
+        "converged when the position error is below this",
+        "m",
+        positive=True,
+        tunable=True,
     ),
-    ParamSpec("orientation_tolerance", "float", 1e-3, "... and the orientation error below this", "rad", positive=True),
+    ParamSpec(
+        "orientation_tolerance",
+        "float",
+        1e-3,
+        "... and the orientation error below this",
+        "rad",
+        positive=True,
+        tunable=True,
+    ),
     ParamSpec(
         "quaternion_tolerance",
         "float",
         1e-2,
         "a goal quaternion whose length differs from 1 by more is rejected",
         positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "diagnostics_rate_hz",
@@ -87,6 +123,7 @@ PARAMETERS = (
         "rate of /diagnostics (also sent at once on a state change)",
         "Hz",
         positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "realtime_priority",
@@ -130,36 +167,17 @@ class CartesianControllerNode(LoopingNode):
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
-        self.model = load_robot(params["robot"])
-        config = ControllerConfig(
-            gain_angular=params["gain_angular"],
-            gain_linear=params["gain_linear"],
-            frame=params["frame"] or None,
-            task=params["task"] or None,
-            damping_max=params["damping_max"],
-            singular_threshold=params["singular_threshold"],
-            respect_velocity_limits=params["respect_velocity_limits"],
-            respect_position_limits=params["respect_position_limits"],
-        )
-        self.controller = CartesianController(self.model, config)
+        self.model = load_node_model(self, params)
+        self._params = params
+        self._configure(params)
+        config = self.controller.config
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
         self.dt = 1.0 / self.rate_hz
         self.supervisor = ControllerSupervisor(
-            ControllerSupervisorConfig(
-                joint_state_timeout=params["joint_state_timeout"],
-                goal_timeout=params["goal_timeout"],
-                goal_twist_timeout=params["goal_twist_timeout"],
-                position_tolerance=params["position_tolerance"],
-                orientation_tolerance=params["orientation_tolerance"],
-                task=self.controller.task,
-            ),
-            self.model.joint_names,
-            int(1e9 / params["diagnostics_rate_hz"]),
+            self._supervisor_config(params, self.controller), self.model.joint_names, self._diagnostics_period_ns
         )
-        self.position_tolerance = params["position_tolerance"]
-        self.orientation_tolerance = params["orientation_tolerance"]
-        self._quaternion_tolerance = params["quaternion_tolerance"]
+        LiveParameters(self, PARAMETERS, self._set_parameters)
 
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
         self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
@@ -196,6 +214,60 @@ class CartesianControllerNode(LoopingNode):
     def detail(self) -> str:
         """One line on the current state."""
         return self.supervisor.detail
+
+    # --- parameters ----------------------------------------------------------------------------
+
+    def _configure(self, params: dict) -> None:
+        """Build the core objects from ``params``: at start, and on a live change.
+
+        Everything is built and checked before anything is replaced, so a refused change
+        leaves the node as it was. The loop thread reads ``self.controller`` once per cycle:
+        swapping it is atomic.
+
+        Raises:
+            ManipKinError: a configuration the controller or its supervisor cannot use.
+        """
+        config = ControllerConfig(
+            gain_angular=params["gain_angular"],
+            gain_linear=params["gain_linear"],
+            frame=params["frame"] or None,
+            task=params["task"] or None,
+            damping_max=params["damping_max"],
+            singular_threshold=params["singular_threshold"],
+            respect_velocity_limits=params["respect_velocity_limits"],
+            respect_position_limits=params["respect_position_limits"],
+        )
+        controller = CartesianController(self.model, config)
+        supervisor_config = self._supervisor_config(params, controller)
+        diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        if hasattr(self, "supervisor"):
+            self.supervisor.reconfigure(supervisor_config, diagnostics_period_ns)
+        self.controller = controller
+        self.position_tolerance = params["position_tolerance"]
+        self.orientation_tolerance = params["orientation_tolerance"]
+        self._quaternion_tolerance = params["quaternion_tolerance"]
+        self._diagnostics_period_ns = diagnostics_period_ns
+
+    @staticmethod
+    def _supervisor_config(params: dict, controller: CartesianController) -> ControllerSupervisorConfig:
+        return ControllerSupervisorConfig(
+            joint_state_timeout=params["joint_state_timeout"],
+            goal_timeout=params["goal_timeout"],
+            goal_twist_timeout=params["goal_twist_timeout"],
+            position_tolerance=params["position_tolerance"],
+            orientation_tolerance=params["orientation_tolerance"],
+            task=controller.task,
+        )
+
+    def _set_parameters(self, updates: dict) -> str | None:
+        """Live change of tunable parameters: None once in use, else why not (nothing changes)."""
+        params = {**self._params, **updates}
+        try:
+            self._configure(params)
+        except ManipKinError as error:
+            return str(error)
+        self._params = params
+        return None
 
     # --- inputs --------------------------------------------------------------------------------
 

@@ -1,20 +1,27 @@
 """Node parameters: one table per node gives the declaration, the checks and the ``--help`` text.
 
 Parameters are declared with a :class:`~rcl_interfaces.msg.ParameterDescriptor`
-(description with units, read-only: nodes read them once at start) and
-``dynamic_typing`` so that ``-p rate_hz:=1000`` (an integer on the command line) and
-``-p initial_positions:=[0, 0, 0]`` work where a float is meant; the value is then
-coerced and checked here, and a bad one stops the node with a one-line error (exit 2
-through ``run_node``).
+(description with units) and ``dynamic_typing`` so that ``-p rate_hz:=1000`` (an integer
+on the command line) and ``-p initial_positions:=[0, 0, 0]`` work where a float is meant;
+the value is then coerced and checked here, and a bad one stops the node with a one-line
+error (exit 2 through ``run_node``).
+
+Live tuning: a ``tunable`` parameter (gains, damping, tolerances, timeouts, limits) can be
+set on the running node through the standard parameter services (``ros2 param set``,
+``rclpy.parameter_client.AsyncParameterClient``). :class:`LiveParameters` checks the new
+value with the same :meth:`ParamSpec.coerce` as at start and hands it to the node, which
+rebuilds its core object with it; an invalid value is refused with the reason in the
+``SetParametersResult``. The other parameters are structural (robot, links, rates, frames)
+and read-only: setting one is refused, and their description says so.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -37,6 +44,8 @@ class ParamSpec:
         positive: True when the value must be > 0.
         choices: valid values for strings, or empty.
         default_text: how to show a None default in ``--help``.
+        tunable: settable on the running node (see :class:`LiveParameters`); otherwise
+            structural and read-only.
     """
 
     name: str
@@ -48,17 +57,19 @@ class ParamSpec:
     positive: bool = False
     choices: tuple[str, ...] = ()
     default_text: str = ""
+    tunable: bool = False
 
     def descriptor(self) -> ParameterDescriptor:
-        """The descriptor: description with unit, valid range, read-only, dynamic typing."""
+        """The descriptor: description with unit, valid range, read-only unless tunable, dynamic typing."""
         text = self.description + (f" [{self.unit}]" if self.unit else "")
         if self.choices:
             text += f" (one of: {', '.join(self.choices)})"
+        text += " (settable at run time)" if self.tunable else " (read-only: structural, set at start)"
         return ParameterDescriptor(
             name=self.name,
             description=text,
             additional_constraints=self.constraint_text(),
-            read_only=True,
+            read_only=not self.tunable,
             dynamic_typing=True,
         )
 
@@ -84,7 +95,8 @@ class ParamSpec:
             default = str(self.default)
         unit = f" [{self.unit}]" if self.unit else ""
         choices = f" One of: {', '.join(self.choices)}." if self.choices else ""
-        return f"  {self.name} (default {default}){unit}: {self.description}.{choices}"
+        live = " Settable at run time." if self.tunable else ""
+        return f"  {self.name} (default {default}){unit}: {self.description}.{choices}{live}"
 
     def coerce(self, value):
         """``value`` converted to this parameter's kind and checked; InvalidArgumentError otherwise."""
@@ -168,6 +180,53 @@ def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, obje
     return values
 
 
+class LiveParameters:
+    """Run-time changes of a node's tunable parameters, checked as at start.
+
+    Registered as the node's on-set-parameters callback: every value of a set request is
+    coerced and checked by its :class:`ParamSpec`; when all pass, ``apply(updates)`` gets
+    the checked values by name and returns None (the node now uses them) or the reason it
+    cannot use them (the request is refused, nothing changes). Parameters not in ``specs``
+    (``use_sim_time``...) are left to rclpy.
+
+    Args:
+        node: the node.
+        specs: its parameter table.
+        apply: ``apply({name: value}) -> None | reason``; called in the executor thread.
+    """
+
+    def __init__(self, node: Node, specs: Sequence[ParamSpec], apply: Callable[[dict[str, object]], str | None]):
+        self._specs = {spec.name: spec for spec in specs}
+        self._apply = apply
+        self._logger = node.get_logger()
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
+        updates: dict[str, object] = {}
+        for parameter in parameters:
+            spec = self._specs.get(parameter.name)
+            if spec is None:
+                continue
+            if not spec.tunable:
+                return _refused(f"parameter {spec.name} is read-only: structural, set at start (restart the node)")
+            value = None if parameter.type_ == Parameter.Type.NOT_SET else parameter.value
+            try:
+                updates[spec.name] = spec.coerce(value)
+            except InvalidArgumentError as error:
+                return _refused(str(error))
+        if not updates:
+            return SetParametersResult(successful=True)
+        problem = self._apply(updates)
+        if problem:
+            return _refused(problem)
+        self._logger.info("parameters set: " + ", ".join(f"{name} = {value!r}" for name, value in updates.items()))
+        return SetParametersResult(successful=True)
+
+
+def _refused(reason: str) -> SetParametersResult:
+    return SetParametersResult(successful=False, reason=reason)
+
+
 def usage_text(
     executable: str,
     summary: str,
@@ -190,7 +249,8 @@ def usage_text(
     lines += [
         summary.strip(),
         "",
-        "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters):",
+        "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters;",
+        "those marked 'Settable at run time' also with `ros2 param set` on the running node):",
     ]
     lines += [spec.help_line() for spec in specs]
     lines += ["", "Subscribes:"]

@@ -22,15 +22,16 @@ from manip_kin.errors import InvalidArgumentError, JointCountError
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
+from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
-from manip_kin.robots import bundled_robot_names, load_robot
+from manip_kin.robots import bundled_robot_names
 
 NODE_NAME = "robot_state"
 
 PARAMETERS = (
-    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file"),
+    *model_parameters("genova7"),
     ParamSpec(
         "initial_positions",
         "float_list",
@@ -40,7 +41,15 @@ PARAMETERS = (
         default_text="the robot's scenario start, else zeros clipped into the limits",
     ),
     ParamSpec("rate_hz", "float", 500.0, "integration and publishing rate", "Hz", positive=True),
-    ParamSpec("command_timeout", "float", 0.1, "a command older than this counts as zero velocity", "s", positive=True),
+    ParamSpec(
+        "command_timeout",
+        "float",
+        0.1,
+        "a command older than this counts as zero velocity",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
     ParamSpec(
         "base_frame",
         "str",
@@ -49,7 +58,13 @@ PARAMETERS = (
         default_text="the robot's base frame (base_link)",
     ),
     ParamSpec(
-        "diagnostics_rate_hz", "float", 2.0, "rate of the loop statistics on /diagnostics (0: off)", "Hz", minimum=0.0
+        "diagnostics_rate_hz",
+        "float",
+        2.0,
+        "rate of the loop statistics on /diagnostics (0: off)",
+        "Hz",
+        minimum=0.0,
+        tunable=True,
     ),
     ParamSpec(
         "realtime_priority",
@@ -222,14 +237,12 @@ class RobotStateNode(LoopingNode):
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
-        self.model = load_robot(params["robot"])
+        self.model = load_node_model(self, params)
         self.integrator = JointIntegrator(self.model, initial_positions(self.model, params["initial_positions"]))
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
-        self.command_timeout_ns = int(params["command_timeout"] * 1e9)
-        self._diagnostics_period_ns = (
-            int(1e9 / params["diagnostics_rate_hz"]) if params["diagnostics_rate_hz"] > 0 else 0
-        )
+        self._set_parameters(params)
+        LiveParameters(self, PARAMETERS, self._set_parameters)
 
         self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", 10)
         self._joint_state_pub = self.create_publisher(JointState, "joint_states", 10)
@@ -262,6 +275,14 @@ class RobotStateNode(LoopingNode):
             f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
         )
         self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+
+    def _set_parameters(self, params: dict) -> None:
+        """The tunable parameters in ``params`` (at start, and on a live change: the next cycle uses them)."""
+        if "command_timeout" in params:
+            self.command_timeout_ns = int(params["command_timeout"] * 1e9)
+        if "diagnostics_rate_hz" in params:
+            rate = params["diagnostics_rate_hz"]
+            self._diagnostics_period_ns = int(1e9 / rate) if rate > 0 else 0
 
     def _publish_description(self) -> None:
         try:

@@ -63,6 +63,8 @@ def run_node(
         except ValueError as error:  # includes manip_kin errors: bad robot, bad parameter
             print(f"error: {error}", file=sys.stderr)
             return 2
+        except (KeyboardInterrupt, ExternalShutdownException):  # stopped while waiting (robot_description)
+            return 0
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         try:

@@ -24,10 +24,10 @@ from sensor_msgs.msg import JointState
 
 from manip_kin.errors import ManipKinError
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
+from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
-from manip_kin.robots import load_robot
 from manip_kin.supervisors import GeneratorState, GeneratorSupervisor
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, check_line_reachable
 
@@ -37,9 +37,11 @@ NODE_NAME = "trajectory_generator"
 STATES = tuple(state.value for state in GeneratorState)
 
 PARAMETERS = (
-    ParamSpec("robot", "str", "genova7", "bundled robot name or path to a robot YAML/URDF file (for the reach check)"),
+    *model_parameters(""),
     ParamSpec("rate_hz", "float", 500.0, "rate of goal_pose and goal_twist while a line runs", "Hz", positive=True),
-    ParamSpec("time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS),
+    ParamSpec(
+        "time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS, tunable=True
+    ),
     ParamSpec(
         "max_linear_velocity",
         "float",
@@ -47,6 +49,7 @@ PARAMETERS = (
         "speed limit of the position (the constant speed of 'constant')",
         "m/s",
         positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "max_linear_acceleration",
@@ -55,8 +58,17 @@ PARAMETERS = (
         "acceleration limit of the position (not used by 'constant')",
         "m/s^2",
         positive=True,
+        tunable=True,
     ),
-    ParamSpec("max_angular_velocity", "float", 0.5, "angular speed limit of the orientation", "rad/s", positive=True),
+    ParamSpec(
+        "max_angular_velocity",
+        "float",
+        0.5,
+        "angular speed limit of the orientation",
+        "rad/s",
+        positive=True,
+        tunable=True,
+    ),
     ParamSpec(
         "max_angular_acceleration",
         "float",
@@ -64,13 +76,20 @@ PARAMETERS = (
         "angular acceleration limit (not used by 'constant')",
         "rad/s^2",
         positive=True,
+        tunable=True,
     ),
-    ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits"),
+    ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits", tunable=True),
     ParamSpec(
         "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
     ),
     ParamSpec(
-        "tool_pose_timeout", "float", 0.5, "a target is rejected when tool_pose is older than this", "s", positive=True
+        "tool_pose_timeout",
+        "float",
+        0.5,
+        "a target is rejected when tool_pose is older than this",
+        "s",
+        positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "quaternion_tolerance",
@@ -78,8 +97,9 @@ PARAMETERS = (
         1e-2,
         "a target quaternion whose length differs from 1 by more is rejected",
         positive=True,
+        tunable=True,
     ),
-    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True),
+    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True, tunable=True),
     ParamSpec(
         "diagnostics_rate_hz",
         "float",
@@ -87,6 +107,7 @@ PARAMETERS = (
         "rate of /diagnostics (also sent at once on a state change)",
         "Hz",
         positive=True,
+        tunable=True,
     ),
     ParamSpec(
         "realtime_priority",
@@ -127,21 +148,13 @@ class TrajectoryGeneratorNode(LoopingNode):
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
-        self.model = load_robot(params["robot"])
+        self.model = load_node_model(self, params)
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
-        self.time_scaling = params["time_scaling"]
-        self.limits = MotionLimits(
-            max_linear_velocity=params["max_linear_velocity"],
-            max_linear_acceleration=params["max_linear_acceleration"],
-            max_angular_velocity=params["max_angular_velocity"],
-            max_angular_acceleration=params["max_angular_acceleration"],
-        )
-        self.check_reach = params["check_reach"]
-        self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
-        self._quaternion_tolerance = params["quaternion_tolerance"]
-        self._path_points = max(2, params["path_points"])
         self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
+        self._params = params
+        self._configure(params)
+        LiveParameters(self, PARAMETERS, self._set_parameters)
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
@@ -184,6 +197,37 @@ class TrajectoryGeneratorNode(LoopingNode):
     def last_rejection(self) -> str:
         """Why the last target was rejected."""
         return self.supervisor.last_rejection
+
+    # --- parameters ----------------------------------------------------------------------------
+
+    def _configure(self, params: dict) -> None:
+        """Limits and checks from ``params`` (at start and on a live change; the next line uses them).
+
+        Raises:
+            ManipKinError: limits the planner cannot use.
+        """
+        self.limits = MotionLimits(
+            max_linear_velocity=params["max_linear_velocity"],
+            max_linear_acceleration=params["max_linear_acceleration"],
+            max_angular_velocity=params["max_angular_velocity"],
+            max_angular_acceleration=params["max_angular_acceleration"],
+        )
+        self.time_scaling = params["time_scaling"]
+        self.check_reach = params["check_reach"]
+        self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
+        self._quaternion_tolerance = params["quaternion_tolerance"]
+        self._path_points = max(2, params["path_points"])
+        self.supervisor.throttle.period_ns = int(1e9 / params["diagnostics_rate_hz"])
+
+    def _set_parameters(self, updates: dict) -> str | None:
+        """Live change of tunable parameters: None once in use (from the next line on), else why not."""
+        params = {**self._params, **updates}
+        try:
+            self._configure(params)
+        except ManipKinError as error:  # raised before anything changed
+            return str(error)
+        self._params = params
+        return None
 
     # --- inputs --------------------------------------------------------------------------------
 

@@ -3,7 +3,7 @@
 Targets (issue 3, numpy on this machine): one control step ≤ 12 µs; IK ≥ 99.9 % success at
 ≤ 1 ms mean over random reachable targets from random initial guesses.
 
-``python -m manip_kin.benchmarks_motion [--steps N] [--targets N]`` prints both for genova7
+``python bench/bench_motion.py [--steps N] [--targets N]`` prints both for genova7
 and the Franka Panda URDF of ``example-robot-data``.
 """
 
@@ -146,7 +146,9 @@ def _models() -> dict[str, RobotModel]:
 
     models = {"genova7": load_robot("genova7")}
     try:
-        from manip_kin.urdf import example_robot_data_urdf, load_urdf
+        from robot_data_files import example_robot_data_urdf
+
+        from manip_kin.urdf import load_urdf
 
         models["panda (URDF)"] = load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"))
     except (ImportError, FileNotFoundError) as error:

@@ -1,0 +1,229 @@
+"""A URDF document read into a kinematic tree: links, joints, parent/child maps, chain walks.
+
+:class:`UrdfTree` parses the XML and checks every field it reads; each error is a
+:class:`~manip_kin.errors.ModelFileError` naming the source (a path, a topic) and the field
+(``joint[panda_joint3]/origin@xyz``). :mod:`manip_kin.urdf.chain` turns a chain of it into
+a model.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import numpy as np
+
+from manip_kin.errors import ModelFileError
+from manip_kin.rotations import transform_from_xyz_rpy
+
+# URDF joint types that move along the chain.
+MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+
+
+@dataclass(frozen=True)
+class UrdfJoint:
+    """One ``<joint>`` element, parsed; numbers in [m], [rad], [m/s], [rad/s]."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray  # (4, 4), child frame in parent frame at zero position
+    axis: np.ndarray  # (3,), unit
+    limit: dict[str, float]  # the <limit> attributes that are present
+    has_mimic: bool
+
+
+class UrdfTree:
+    """Parses one URDF document; every error names the source and the field."""
+
+    def __init__(self, xml_text: str | bytes, source: str):
+        self.source = source
+        try:
+            self.root = ET.fromstring(xml_text)
+        except ET.ParseError as error:
+            line, column = error.position  # expat counts columns from 0, editors from 1
+            problem = f"malformed XML: {str(error).split(':')[0]}"
+            raise ModelFileError(source, f"line {line}, column {column + 1}", problem) from None
+        if self.root.tag != "robot":
+            raise self.fail("robot", f"the root element is <{self.root.tag}>; a URDF starts with <robot>")
+        self.links = self._read_links()
+        self.joints = [self._read_joint(element, i) for i, element in enumerate(self.root.findall("joint"))]
+        self.parent_joint: dict[str, UrdfJoint] = {}
+        self.child_joints: dict[str, list[UrdfJoint]] = {name: [] for name in self.links}
+        self._link_joints()
+
+    def fail(self, field: str, problem: str) -> ModelFileError:
+        return ModelFileError(self.source, field, problem)
+
+    # --- elements
+
+    def _read_links(self) -> list[str]:
+        names: list[str] = []
+        for index, element in enumerate(self.root.findall("link")):
+            name = element.get("name", "").strip()
+            if not name:
+                raise self.fail(f"link[#{index + 1}]@name", "missing; every <link> needs a name")
+            if name in names:
+                raise self.fail(f"link[{name}]@name", "two <link> elements have this name")
+            names.append(name)
+        return names
+
+    def _read_joint(self, element: ET.Element, index: int) -> UrdfJoint:
+        name = element.get("name", "").strip()
+        if not name:
+            raise self.fail(f"joint[#{index + 1}]@name", "missing; every <joint> needs a name")
+        where = f"joint[{name}]"
+        joint_type = element.get("type", "").strip()
+        if joint_type not in URDF_JOINT_TYPES:
+            raise self.fail(f"{where}@type", f"{joint_type!r}; valid: {', '.join(URDF_JOINT_TYPES)}")
+        origin = np.eye(4)
+        origin_element = element.find("origin")
+        if origin_element is not None:
+            xyz = self._numbers(origin_element, "xyz", f"{where}/origin@xyz", default=(0.0, 0.0, 0.0))
+            rpy = self._numbers(origin_element, "rpy", f"{where}/origin@rpy", default=(0.0, 0.0, 0.0))
+            origin = transform_from_xyz_rpy(xyz, rpy)
+        axis = np.array([1.0, 0.0, 0.0])  # the URDF default axis is x, not z
+        axis_element = element.find("axis")
+        if axis_element is not None:
+            axis = self._numbers(axis_element, "xyz", f"{where}/axis@xyz", default=(1.0, 0.0, 0.0))
+            norm = float(np.linalg.norm(axis))
+            if norm < 1e-12 and joint_type in MOVABLE_TYPES:
+                raise self.fail(f"{where}/axis@xyz", "has zero length; valid: a non-zero direction")
+            axis = axis / norm if norm >= 1e-12 else np.array([1.0, 0.0, 0.0])
+        limit: dict[str, float] = {}
+        limit_element = element.find("limit")
+        if limit_element is not None:
+            for attribute in ("lower", "upper", "velocity", "effort"):
+                if limit_element.get(attribute) is not None:
+                    field = f"{where}/limit@{attribute}"
+                    limit[attribute] = self._number(limit_element.get(attribute), field, allow_infinite=True)
+        return UrdfJoint(
+            name=name,
+            type=joint_type,
+            parent=self._link_reference(element, "parent", where),
+            child=self._link_reference(element, "child", where),
+            origin=origin,
+            axis=axis,
+            limit=limit,
+            has_mimic=element.find("mimic") is not None,
+        )
+
+    def _link_reference(self, element: ET.Element, tag: str, where: str) -> str:
+        reference = element.find(tag)
+        name = "" if reference is None else reference.get("link", "").strip()
+        if not name:
+            raise self.fail(f"{where}/{tag}@link", f'missing; a joint needs <{tag} link="..."/>')
+        if name not in self.links:
+            raise self.fail(f"{where}/{tag}@link", f"{name!r} is not a <link> of this robot")
+        return name
+
+    def _numbers(self, element: ET.Element, attribute: str, field: str, default) -> np.ndarray:
+        text = element.get(attribute)
+        if text is None:
+            return np.array(default, dtype=float)
+        parts = text.split()
+        if len(parts) != len(default):
+            raise self.fail(field, f"{text!r} has {len(parts)} values; valid: {len(default)} numbers")
+        return np.array([self._number(part, field, allow_infinite=False, whole=text) for part in parts])
+
+    def _number(self, text: str, field: str, allow_infinite: bool, whole: str | None = None) -> float:
+        shown = repr(whole if whole is not None else text)
+        try:
+            value = float(text)
+        except ValueError:
+            hint = "; run xacro on the file first" if "$" in (whole or text) else ""
+            raise self.fail(field, f"{shown} is not numeric{hint}") from None
+        if math.isnan(value) or (math.isinf(value) and not allow_infinite):
+            raise self.fail(field, f"{shown} is not a finite number")
+        return value
+
+    # --- tree
+
+    def _link_joints(self) -> None:
+        names = set()
+        for joint in self.joints:
+            if joint.name in names:
+                raise self.fail(f"joint[{joint.name}]@name", "two <joint> elements have this name")
+            names.add(joint.name)
+            if joint.child in self.parent_joint:
+                other = self.parent_joint[joint.child].name
+                raise self.fail(
+                    f"joint[{joint.name}]/child@link",
+                    f"link {joint.child!r} is already the child of joint {other!r}; URDF is a tree",
+                )
+            self.parent_joint[joint.child] = joint
+            self.child_joints[joint.parent].append(joint)
+
+    def root_link(self) -> str:
+        roots = [name for name in self.links if name not in self.parent_joint]
+        if len(roots) != 1:
+            problem = f"several root links: {roots}" if roots else "every link has a parent joint (a cycle)"
+            raise self.fail("base_link", f"{problem}; name the base link explicitly")
+        return roots[0]
+
+    def check_link(self, name: str, field: str) -> str:
+        if name not in self.links:
+            raise self.fail(field, f"unknown link {name!r}; links: {', '.join(self.links)}")
+        return name
+
+    def _leads_to_movable(self, joint: UrdfJoint) -> bool:
+        """True when ``joint`` or a joint below it is not fixed."""
+        pending, seen = [joint], set()
+        while pending:
+            current = pending.pop()
+            if current.type != "fixed":
+                return True
+            if current.name not in seen:  # a malformed file may hold a cycle
+                seen.add(current.name)
+                pending.extend(self.child_joints[current.child])
+        return False
+
+    def _walk_unbranched(self, link: str) -> tuple[str, list[UrdfJoint]]:
+        """From ``link``, follow the only child joint (the only one leading on to a movable
+        joint where there are several); returns the link where that stops and the joints
+        leading on from it (several: a branch; none: the end)."""
+        visited = {link}
+        while True:
+            children = self.child_joints[link]
+            if len(children) != 1:
+                children = [joint for joint in children if self._leads_to_movable(joint)]
+            if len(children) != 1:
+                return link, children
+            link = children[0].child
+            if link in visited:  # unreachable for a tree; guards a malformed file
+                raise self.fail("tip_link", f"the joints below {link!r} form a cycle")
+            visited.add(link)
+
+    def default_tip(self, base: str) -> str:
+        """The last link of the unbranched chain below ``base`` (see :mod:`manip_kin.urdf`).
+
+        Raises:
+            ModelFileError: the tree branches into several movable chains before any movable
+                joint (two arms on one base, a mobile base with an arm and a head...): the
+                message lists the end of each branch as a candidate ``tip_link``.
+        """
+        tip, branches = self._walk_unbranched(base)
+        if len(branches) > 1 and not any(joint.type != "fixed" for joint in self.chain(base, tip, "tip_link")):
+            candidates = [self._walk_unbranched(joint.child)[0] for joint in branches]
+            raise self.fail(
+                "tip_link",
+                f"the tree below {base!r} branches at {tip!r} into several movable chains, so there is no "
+                f"default tip; set the tip link (node parameter tip_link, CLI --tip-link) to one of "
+                f"{', '.join(repr(c) for c in candidates)} or a link below one of them",
+            )
+        return tip
+
+    def chain(self, base: str, tip: str, field: str) -> list[UrdfJoint]:
+        """The joints from ``base`` down to ``tip``, base first."""
+        joints: list[UrdfJoint] = []
+        link = tip
+        while link != base:
+            joint = self.parent_joint.get(link)
+            if joint is None or len(joints) > len(self.joints):
+                raise self.fail(field, f"link {tip!r} is not below link {base!r}")
+            joints.append(joint)
+            link = joint.parent
+        return joints[::-1]
