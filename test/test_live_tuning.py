@@ -161,7 +161,7 @@ def test_generator_limits_set_at_run_time_time_the_next_line(harness):
         harness.spin_for(0.05, every=stream)
         harness.publish("/line_target", conv.make_pose_stamped(target, "base_link"))
         assert harness.spin_until(lambda: node.state == "streaming", 5, every=stream)
-        durations.append(node.line.duration)
+        durations.append(node.supervisor.motion.duration)
         assert harness.spin_until(lambda: node.state == "holding", 10, every=stream)
     length = float(np.linalg.norm([0.0, 0.12, -0.05]))
     # Constant speed: duration = length / speed.
