@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from manip_kin.closed_form import closed_form_solutions
 from manip_kin.control import _pose_error_values
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.fast_step import compile_ik_iteration
@@ -79,6 +80,8 @@ class IKResult:
         attempts: how many starts were tried (1 + restarts used).
         task: name of the task solved (see :mod:`manip_kin.tasks`).
         elapsed: wall time spent [s].
+        solver: ``numeric``, ``closed_form:<structure>`` (see :mod:`manip_kin.closed_form`), or
+            ``closed_form:<structure>+numeric`` when a closed-form start needed refinement.
     """
 
     q: np.ndarray
@@ -90,6 +93,7 @@ class IKResult:
     attempts: int = 1
     task: str = "full"
     elapsed: float = 0.0
+    solver: str = "numeric"
 
 
 @dataclass
@@ -260,6 +264,7 @@ def solve_ik(
     time_budget: float = 0.5,
     seed: int | None = None,
     rng: np.random.Generator | None = None,
+    closed_form: bool = True,
 ) -> IKResult:
     """Joint values putting ``frame`` at ``target_pose``, within the joint limits.
 
@@ -284,6 +289,10 @@ def solve_ik(
         time_budget: wall-time limit over all attempts [s]; the first attempt always runs.
         seed: seed of the random restarts (ignored when ``rng`` is given).
         rng: random generator for the restarts.
+        closed_form: use the closed form when the arm, frame and task have one
+            (:mod:`manip_kin.closed_form`): the solution nearest to ``q0``, refined by the
+            iteration only when it misses the tolerances. Falls back to the iteration when the
+            closed form has no solution within the limits (for its failure reason).
 
     Returns:
         An :class:`IKResult`; ``success`` False with a ``reason`` when no attempt converged.
@@ -320,6 +329,25 @@ def solve_ik(
     attempts: list[_Attempt] = []
     total_iterations = 0
     q_start = problem.project(start.tolist())
+    solver = "numeric"
+    if closed_form:
+        found = closed_form_solutions(model, np.asarray(goal), frame_index, task_spec, start, *tolerances[::-1])
+        candidates = [] if found is None else (found.solutions or found.unverified)
+        if candidates:
+            nearest = min(candidates, key=lambda s: float(np.linalg.norm(s.q - start)))
+            if found.solutions:
+                return IKResult(
+                    q=nearest.q,
+                    success=True,
+                    iterations=0,
+                    position_error=nearest.position_error,
+                    orientation_error=nearest.orientation_error,
+                    reason="converged",
+                    task=task_spec.name,
+                    elapsed=time.perf_counter() - started,
+                    solver=found.solver,
+                )
+            q_start, solver = nearest.q.tolist(), found.solver + "+numeric"
     out_of_budget = False
     while True:
         attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances)
@@ -345,6 +373,7 @@ def solve_ik(
         attempts=len(attempts),
         task=task_spec.name,
         elapsed=time.perf_counter() - started,
+        solver=solver,
     )
 
 
