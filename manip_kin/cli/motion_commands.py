@@ -19,9 +19,11 @@ from manip_kin.cli.common import (
     print_json,
     robot_from_args,
 )
+from manip_kin.cli.ik_all_command import run_ik_all
 from manip_kin.control import ControllerConfig
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.ik import DEFAULT_DAMPING, IK_METHODS, solve_ik
+from manip_kin.ik_all import require_closed_form
 from manip_kin.model import RobotModel
 from manip_kin.simulation import simulate
 from manip_kin.tasks import COMPONENTS, default_task, parse_task
@@ -86,6 +88,20 @@ def register(subparsers) -> None:
         default=0.5,
         metavar="S",
         help="wall-time limit over all attempts [s] (default 0.5)",
+    )
+    ik.add_argument(
+        "--all",
+        action="store_true",
+        help="list every solution within the joint limits (each revolute joint wrapped into its limits, "
+        "every in-limit wrap listed), from the closed form when the arm has one, else from seeded "
+        "restarts within --time-budget",
+    )
+    ik.add_argument(
+        "--solver",
+        choices=("auto", "closed_form", "numeric"),
+        default="auto",
+        help="auto (default): the closed form for RPP, SCARA and 6R ortho-parallel arms with a spherical "
+        "wrist, else the iteration; numeric: always iterate (as --method, --step, --damping ask)",
     )
     add_json_argument(ik)
     ik.set_defaults(run=run_ik)
@@ -153,6 +169,10 @@ def run_ik(args: argparse.Namespace) -> int:
     q0 = joints_from_args(model, args.q0, "--q0")
     _check_task(model, args.task)
     task = _announce_task("ik", model, args.task, args.frame)
+    if args.all:
+        return run_ik_all(args, model, target, q0, task)
+    if args.solver == "closed_form":
+        require_closed_form(model, args.frame, task)
     result = solve_ik(
         model,
         target,
@@ -168,6 +188,7 @@ def run_ik(args: argparse.Namespace) -> int:
         restarts=args.restarts,
         time_budget=args.time_budget,
         seed=args.seed,
+        closed_form=args.solver != "numeric",
     )
     frame = model.frame_name(model.frame_index(args.frame or model.default_frame))
     if args.json:
@@ -184,11 +205,13 @@ def run_ik(args: argparse.Namespace) -> int:
                 "method": args.method,
                 "frame": frame,
                 "elapsed_s": result.elapsed,
+                "solver": result.solver,
             }
         )
     else:
         status = "converged" if result.success else "did NOT converge"
-        print(f"{model.name}: IK for frame '{frame}' ({args.method}, task {result.task}) {status}")
+        method = args.method if result.solver == "numeric" else result.solver
+        print(f"{model.name}: IK for frame '{frame}' ({method}, task {result.task}) {status}")
         if not result.success:
             print(f"  reason: {result.reason}")
         print(f"  q = {[round(v, 6) for v in result.q.tolist()]}")
