@@ -126,11 +126,11 @@ def run_fk(args: argparse.Namespace) -> int:
     index = model.frame_index(frame)
     reference = model.frame_index(args.in_frame)
     pose = transform_between(model, q, reference, index)
-    summary = {"frame": model.frame_name(index), "in": model.frame_name(reference), **pose_summary(pose)}
+    summary = {"frame": model.frame_name(index), **pose_summary(pose)}
     if args.json:
         print_json(summary)
         return 0
-    where = model.base_frame if reference == 0 else f"frame '{summary['in']}'"
+    where = model.base_frame if reference == 0 else f"frame '{model.frame_name(reference)}'"
     print(f"{model.name}: pose of frame '{summary['frame']}' in {where} at q = {q.round(6).tolist()}")
     print(format_matrix(pose))
     print(f"  xyz [m]        {[round(v, 6) for v in summary['xyz']]}")

@@ -112,13 +112,14 @@ def rotate_2d(angle: float, vector) -> np.ndarray:
     return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
 
 
-def planar_two_link(first, second, target) -> list[tuple[float, float, int]]:
+def planar_two_link(first, second, target, first_hint: float = 0.0) -> list[tuple[float, float, int]]:
     """Both solutions of a planar two-link arm: ``Rot(t1) (first + Rot(t2) second) = target``.
 
     Args:
         first: the first link's vector (shoulder to elbow) at zero angles, shape (2,).
         second: the second link's vector (elbow to wrist) at zero angles, shape (2,).
         target: the wrist point relative to the shoulder, shape (2,).
+        first_hint: ``t1`` when the target is on the shoulder (folded equal links: t1 is free).
 
     Returns:
         ``(t1, t2, side)`` per solution [rad]; ``side`` is +1 when the second link turns
@@ -139,7 +140,10 @@ def planar_two_link(first, second, target) -> list[tuple[float, float, int]]:
         t2 = math.atan2(side * sin_relative, cos_relative) - relative_at_zero
         elbow_to_wrist = rotate_2d(t2, second)
         reach = (first[0] + elbow_to_wrist[0], first[1] + elbow_to_wrist[1])
-        t1 = math.atan2(target[1], target[0]) - math.atan2(reach[1], reach[0])
+        if math.hypot(*target) < 1e-12:
+            t1 = first_hint
+        else:
+            t1 = math.atan2(target[1], target[0]) - math.atan2(reach[1], reach[0])
         solutions.append((t1, t2, side))
     return solutions
 

@@ -106,7 +106,9 @@ class OpwSolver:
                 q1 = math.atan2(centre[1], centre[0]) - math.atan2(horizontal[1], horizontal[0])
             shoulder_name = "front" if across * self.front_sign >= 0.0 else "back"
             in_plane = np.array([across, centre[2]]) - self.shoulder
-            for t2, t3, side in planar_two_link(self.elbow - self.shoulder, self.wrist - self.elbow, in_plane):
+            for t2, t3, side in planar_two_link(
+                self.elbow - self.shoulder, self.wrist - self.elbow, in_plane, float(hint[1])
+            ):
                 # side +1: elbow clockwise of the shoulder-wrist line in (across, z); "up" when the
                 # wrist is ahead (positive across) and the elbow counter-clockwise of it.
                 ahead = 1.0 if across >= 0.0 else -1.0

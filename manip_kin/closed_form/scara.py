@@ -60,7 +60,8 @@ class ScaraSolver:
         offset = self.frame_zero[:2, 3] - last  # last axis to the frame, at q = 0
         wrist = target[:2, 3] - np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]])
         solutions = []
-        for t1, t2, side in planar_two_link(middle - first, last - middle, wrist - first):
+        first_hint = float(hint[self.revolute_joints[0]] * self.signs[0])
+        for t1, t2, side in planar_two_link(middle - first, last - middle, wrist - first, first_hint):
             angles = np.array([t1, t2, yaw - t1 - t2]) * self.signs
             q = np.zeros(4)
             q[list(self.revolute_joints)] = angles
