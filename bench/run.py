@@ -2,7 +2,7 @@
 """``make bench``: manip_kin's speed figures as a readable table and a JSON file.
 
 Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion``
-(control step, IK), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
+(control step, IK), ``closedform`` (closed-form IK, solve_ik with and without it), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
 deviation), ``recorder`` (MCAP write cost, live recording throughput).
 
 Timings here are wall-clock on a shared 2-core machine: medians over many calls,
@@ -26,7 +26,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "nodes", "recorder")
+SECTIONS = ("core", "motion", "closedform", "nodes", "recorder")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -141,6 +141,12 @@ def bench_motion(repeats: int, ik_targets: int) -> list[dict]:
     return rows
 
 
+def bench_closed_form(repeats: int, ik_targets: int) -> list[dict]:
+    from bench_closed_form import run_closed_form_benchmarks
+
+    return run_closed_form_benchmarks(_time_calls, repeats, min(ik_targets, 500))
+
+
 def bench_nodes() -> list[dict]:
     from bench_nodes import run_node_benchmarks
 
@@ -219,6 +225,7 @@ def main() -> int:
     runners = {
         "core": lambda: bench_core(args.repeats),
         "motion": lambda: bench_motion(args.repeats, args.ik_targets),
+        "closedform": lambda: bench_closed_form(args.repeats, args.ik_targets),
         "nodes": bench_nodes,
         "recorder": bench_recorder,
     }
