@@ -9,8 +9,8 @@
 from __future__ import annotations
 
 import numpy as np
+from bench_motion import benchmark_ik
 
-from manip_kin.benchmarks_motion import benchmark_ik
 from manip_kin.closed_form import closed_form_solutions, closed_form_solver
 from manip_kin.kinematics import frame_pose
 from manip_kin.robots import load_robot
@@ -18,7 +18,9 @@ from manip_kin.tasks import default_task
 
 
 def _arms():
-    from manip_kin.urdf import example_robot_data_urdf, load_urdf
+    from robot_data_files import example_robot_data_urdf
+
+    from manip_kin.urdf import load_urdf
 
     arms = [(name, load_robot(name)) for name in ("rpp", "scara", "irb120")]
     arms.append(("kinova jaco (URDF)", load_urdf(example_robot_data_urdf("kinova_description/robots/kinova.urdf"))))

@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kin_reference import dh_fk, homogeneous, poe_fk, rodrigues
 from opw_arm import JOINTS, opw_reference_pose, opw_urdf
+from robot_data_files import example_robot_data_urdf
 
 from manip_kin.closed_form import closed_form_solutions, closed_form_solver
 from manip_kin.ik import solve_ik
@@ -21,7 +22,7 @@ from manip_kin.ik_all import all_ik_solutions
 from manip_kin.kinematics import frame_pose
 from manip_kin.robots import load_robot
 from manip_kin.tasks import parse_task
-from manip_kin.urdf import example_robot_data_urdf, load_urdf, load_urdf_string, model_to_urdf
+from manip_kin.urdf import load_urdf, load_urdf_string, model_to_urdf
 
 RPP_DH = [  # (d, θ, a, α, joint variable): robots.md, l0 = 0.4, l1 = 0.3, l2 = 0.2, l3 = 0.1
     (0.4, 0.0, 0.0, math.pi / 2, None),
