@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.closed_form import closed_form_solutions
+from manip_kin.closed_form import nearest_closed_form
 from manip_kin.control import _pose_error_values
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.fast_step import compile_ik_iteration
@@ -331,11 +331,10 @@ def solve_ik(
     q_start = problem.project(start.tolist())
     solver = "numeric"
     if closed_form:
-        found = closed_form_solutions(model, np.asarray(goal), frame_index, task_spec, start, *tolerances[::-1])
-        candidates = [] if found is None else (found.solutions or found.unverified)
-        if candidates:
-            nearest = min(candidates, key=lambda s: float(np.linalg.norm(s.q - start)))
-            if found.solutions:
+        found = nearest_closed_form(model, np.asarray(goal), frame_index, task_spec, start, *tolerances[::-1])
+        if found is not None and found[1] is not None:
+            name, nearest, verified = found
+            if verified:
                 return IKResult(
                     q=nearest.q,
                     success=True,
@@ -345,9 +344,9 @@ def solve_ik(
                     reason="converged",
                     task=task_spec.name,
                     elapsed=time.perf_counter() - started,
-                    solver=found.solver,
+                    solver=name,
                 )
-            q_start, solver = nearest.q.tolist(), found.solver + "+numeric"
+            q_start, solver = nearest.q.tolist(), name + "+numeric"
     out_of_budget = False
     while True:
         attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances)

@@ -22,7 +22,7 @@ from manip_kin.closed_form import (
     distinct,
     in_limit_variants,
     solver_for_task,
-    task_errors,
+    task_error_function,
 )
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.ik import solve_ik
@@ -154,6 +154,7 @@ def _numeric_solutions(
     solutions: list[Solution] = []
     attempts = 0
     q_start = start
+    errors = task_error_function(model, pose, frame_index, task_spec)
     while attempts <= restarts:
         attempts += 1
         result = solve_ik(
@@ -168,8 +169,9 @@ def _numeric_solutions(
             **tolerances,
         )
         if result.success:
-            for variant, suffix in in_limit_variants(model, result.q):
-                position, orientation = task_errors(model, variant, pose, frame_index, task_spec)
+            for values, suffix in in_limit_variants(model, result.q):
+                variant = np.array(values)
+                position, orientation = errors(variant)
                 candidate = Solution(variant, f"start {attempts - 1}{suffix}", position, orientation)
                 if all(float(np.max(np.abs(variant - other.q))) > NUMERIC_DISTINCT for other in solutions):
                     solutions.append(candidate)

@@ -26,8 +26,8 @@ from manip_kin.closed_form.geometry import chain_geometry, wrap_to_pi
 from manip_kin.closed_form.opw import detect_opw
 from manip_kin.closed_form.rpp import detect_rpp
 from manip_kin.closed_form.scara import detect_scara
-from manip_kin.control import pose_error
-from manip_kin.kinematics import pose_in_base
+from manip_kin.control import _pose_error_values
+from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.tasks import Task
 
@@ -100,44 +100,127 @@ def solver_for_task(model: RobotModel, frame_index: int, task: Task):
     return solver
 
 
-def in_limit_variants(model: RobotModel, q: np.ndarray) -> list[tuple[np.ndarray, str]]:
+def _joint_choices(model: RobotModel) -> list[tuple[bool, float, float, str]]:
+    """Per joint ``(revolute, lower, upper, name)`` as plain floats (cached per model)."""
+    key = (id(model), -1)
+    cached = _SOLVERS.get(key)
+    if cached is None or cached[0] is not model:
+        joints = [(j.is_revolute, float(j.lower), float(j.upper), j.name) for j in model.joints]
+        cached = (model, joints)
+        _SOLVERS[key] = cached
+    return cached[1]
+
+
+def _wraps(revolute: bool, lower: float, upper: float, name: str, value: float) -> list[tuple[float, str]]:
+    """The in-limit values of one joint: every whole-turn shift of a revolute one, a prismatic one as is."""
+    if not revolute:
+        if lower - LIMIT_TOLERANCE <= value <= upper + LIMIT_TOLERANCE:
+            return [(min(upper, max(lower, value)), "")]
+        return []
+    base = wrap_to_pi(value)
+    if not (math.isfinite(lower) and math.isfinite(upper)):
+        return [(base, "")]
+    first = math.ceil((lower - LIMIT_TOLERANCE - base) / (2.0 * math.pi))
+    last = math.floor((upper + LIMIT_TOLERANCE - base) / (2.0 * math.pi))
+    return [
+        (min(upper, max(lower, base + 2.0 * math.pi * turns)), f" {name}{turns * 2:+d}pi" if turns else "")
+        for turns in range(first, last + 1)
+    ]
+
+
+def in_limit_variants(model: RobotModel, q) -> list[tuple[list[float], str]]:
     """Every copy of ``q`` within the limits: revolute joints shifted by whole turns.
 
     Returns ``(q, suffix)`` pairs; ``suffix`` names the turns added relative to the angle in
     (-π, π], e.g. `` joint6+2pi``. A joint without finite limits is wrapped into (-π, π].
     Empty when a prismatic joint (or a revolute joint whose range misses every turn) is out.
     """
-    options: list[list[tuple[float, str]]] = []
-    for j, joint in enumerate(model.joints):
-        value, lower, upper = float(q[j]), float(model.lower[j]), float(model.upper[j])
-        choices = []
-        if joint.is_revolute:
-            base = wrap_to_pi(value)
-            if not (math.isfinite(lower) and math.isfinite(upper)):
-                choices.append((base, ""))
-            else:
-                first = math.ceil((lower - LIMIT_TOLERANCE - base) / (2.0 * math.pi))
-                last = math.floor((upper + LIMIT_TOLERANCE - base) / (2.0 * math.pi))
-                for turns in range(first, last + 1):
-                    shifted = min(upper, max(lower, base + 2.0 * math.pi * turns))
-                    suffix = f" {joint.name}{turns * 2:+d}pi" if turns else ""
-                    choices.append((shifted, suffix))
-        elif lower - LIMIT_TOLERANCE <= value <= upper + LIMIT_TOLERANCE:
-            choices.append((min(upper, max(lower, value)), ""))
+    options = []
+    for (revolute, lower, upper, name), value in zip(_joint_choices(model), q):
+        choices = _wraps(revolute, lower, upper, name, float(value))
         if not choices:
             return []
         options.append(choices)
     return [
-        (np.array([value for value, _ in combination]), "".join(suffix for _, suffix in combination))
+        ([value for value, _ in combination], "".join(suffix for _, suffix in combination))
         for combination in itertools.product(*options)
     ]
 
 
-def task_errors(model: RobotModel, q: np.ndarray, target: np.ndarray, frame_index: int, task: Task):
-    """``(position, orientation)`` task error norms of ``q`` against ``target`` [m], [rad]."""
-    orientation, position = pose_error(pose_in_base(model, q, frame_index), target)
-    orientation_norm, position_norm = task.error_norms(orientation, position)
-    return position_norm, orientation_norm
+@dataclass(frozen=True)
+class _LimitArrays:
+    """The joint limits as arrays for :func:`_nearest_variant` (infinite limits as ±1e9)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    wrapped: np.ndarray  # revolute with finite limits: shifted by whole turns into them
+    circular: np.ndarray  # revolute without finite limits: wrapped into (-π, π]
+    names: tuple[str, ...]
+
+
+def _limit_arrays(model: RobotModel) -> _LimitArrays:
+    key = (id(model), -2)
+    cached = _SOLVERS.get(key)
+    if cached is None or cached[0] is not model:
+        revolute = ~model.is_prismatic
+        finite = np.isfinite(model.lower) & np.isfinite(model.upper)
+        arrays = _LimitArrays(
+            lower=np.where(np.isfinite(model.lower), model.lower, -1e9),
+            upper=np.where(np.isfinite(model.upper), model.upper, 1e9),
+            wrapped=revolute & finite,
+            circular=revolute & ~finite,
+            names=tuple(model.joint_names),
+        )
+        cached = (model, arrays)
+        _SOLVERS[key] = cached
+    return cached[1]
+
+
+def _nearest_variant(model: RobotModel, raw: list, reference: np.ndarray) -> tuple[list[float], int, str] | None:
+    """The in-limit copy nearest to ``reference`` over every raw solution, and which one it copies.
+
+    The distance is a sum over joints, so each joint takes its own nearest whole-turn shift;
+    all raw solutions at once, as arrays.
+    """
+    limits = _limit_arrays(model)
+    q = np.array([solution for solution, _ in raw], dtype=float)
+    turn = 2.0 * math.pi
+    base = np.where(limits.wrapped | limits.circular, np.remainder(q + math.pi, turn) - math.pi, q)
+    first = np.ceil((limits.lower - LIMIT_TOLERANCE - base) / turn)
+    last = np.floor((limits.upper + LIMIT_TOLERANCE - base) / turn)
+    turns = np.clip(np.round((reference - base) / turn), first, last)
+    values = np.where(limits.wrapped, np.clip(base + turn * turns, limits.lower, limits.upper), base)
+    inside = (q >= limits.lower - LIMIT_TOLERANCE) & (q <= limits.upper + LIMIT_TOLERANCE)
+    valid = np.where(limits.wrapped, first <= last, limits.circular | inside).all(axis=1)
+    values = np.where(limits.wrapped | limits.circular, values, np.clip(q, limits.lower, limits.upper))
+    distance = np.where(valid, ((values - reference) ** 2).sum(axis=1), np.inf)
+    index = int(np.argmin(distance))
+    if not np.isfinite(distance[index]):
+        return None
+    suffix = "".join(
+        f" {name}{int(2 * t):+d}pi"
+        for name, t, wrapped in zip(limits.names, turns[index], limits.wrapped)
+        if wrapped and t != 0
+    )
+    return values[index].tolist(), index, suffix
+
+
+def task_error_function(model: RobotModel, target: np.ndarray, frame_index: int, task: Task):
+    """``errors(q) -> (position, orientation)``: task error norms of ``q`` at ``target`` [m], [rad].
+
+    Runs the model's unrolled forward kinematics on plain floats (about 10 µs a call).
+    """
+    chain = compiled_kinematics(model, frame_index, False)
+    goal = np.asarray(target, dtype=float).tolist()
+    position_rows, orientation_rows = task.position_rows, task.orientation_rows
+
+    def errors(q) -> tuple[float, float]:
+        error = _pose_error_values(chain([float(v) for v in q]), goal)
+        position = math.sqrt(sum(error[r] * error[r] for r in position_rows))
+        orientation = math.sqrt(sum(error[r] * error[r] for r in orientation_rows))
+        return position, orientation
+
+    return errors
 
 
 def distinct(solutions: list[Solution], tolerance: float = 1e-7) -> list[Solution]:
@@ -177,16 +260,50 @@ def closed_form_solutions(
     target = np.asarray(target, dtype=float)
     hint = np.zeros(model.dof) if hint is None else np.asarray(hint, dtype=float)
     raw = solver.solve(target, hint)
+    errors = task_error_function(model, target, frame_index, task)
     verified, unverified = [], []
     for q, branch in raw:
         for variant, suffix in in_limit_variants(model, q):
-            position, orientation = task_errors(model, variant, target, frame_index, task)
-            solution = Solution(variant, branch + suffix, position, orientation)
+            position, orientation = errors(variant)
+            solution = Solution(np.array(variant), branch + suffix, position, orientation)
             ok = position <= tolerance_position and orientation <= tolerance_orientation
             (verified if ok else unverified).append(solution)
     return ClosedFormResult(
         solver=f"closed_form:{solver.structure}",
         solutions=sorted(distinct(verified), key=lambda s: s.branch),
         unverified=distinct(unverified),
-        branches=len(distinct([Solution(q, b, 0.0, 0.0) for q, b in raw], 1e-9)),
+        branches=len(distinct([Solution(np.asarray(q, dtype=float), b, 0.0, 0.0) for q, b in raw], 1e-9)),
     )
+
+
+def nearest_closed_form(
+    model: RobotModel,
+    target: np.ndarray,
+    frame_index: int,
+    task: Task,
+    reference: np.ndarray,
+    tolerance_position: float = 1e-6,
+    tolerance_orientation: float = 1e-6,
+) -> tuple[str, Solution | None, bool] | None:
+    """The in-limit closed-form solution nearest to ``reference`` (what :func:`solve_ik` wants).
+
+    Only that one is checked by forward kinematics, so this is cheaper than listing them all.
+
+    Returns:
+        None without a closed form; else ``(solver, nearest or None, verified)``: ``nearest``
+        is None when no solution is within the limits; ``verified`` False when it misses the
+        tolerances (the caller refines it).
+    """
+    solver = solver_for_task(model, frame_index, task)
+    if solver is None:
+        return None
+    name = f"closed_form:{solver.structure}"
+    reference = np.asarray(reference, dtype=float)
+    raw = solver.solve(target, reference)
+    nearest = _nearest_variant(model, raw, reference) if raw else None
+    if nearest is None:
+        return name, None, False
+    values, index, suffix = nearest
+    position, orientation = task_error_function(model, target, frame_index, task)(values)
+    verified = position <= tolerance_position and orientation <= tolerance_orientation
+    return name, Solution(np.array(values), raw[index][1] + suffix, position, orientation), verified

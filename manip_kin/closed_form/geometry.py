@@ -106,10 +106,10 @@ def distance_to_line(point, line_point, direction) -> float:
     return float(np.linalg.norm(np.cross(point - line_point, direction)))
 
 
-def rotate_2d(angle: float, vector) -> np.ndarray:
+def rotate_2d(angle: float, vector) -> tuple[float, float]:
     """``vector`` (x, y) rotated counter-clockwise by ``angle`` [rad]."""
     c, s = math.cos(angle), math.sin(angle)
-    return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
+    return (c * vector[0] - s * vector[1], s * vector[0] + c * vector[1])
 
 
 def planar_two_link(first, second, target, first_hint: float = 0.0) -> list[tuple[float, float, int]]:
