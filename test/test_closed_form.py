@@ -270,3 +270,18 @@ def test_numeric_all_lists_distinct_verified_solutions_for_a_redundant_arm():
         np.testing.assert_allclose(frame_pose(model, solution.q), target, atol=1e-5)
         for other in result.solutions[i + 1 :]:
             assert np.max(np.abs(solution.q - other.q)) > 1e-4
+
+
+@settings(max_examples=40, derandomize=True, deadline=None)
+@given(u=fractions(6))
+def test_irb120_wrist_aligned_targets_have_finite_exact_solutions(u):
+    model = load_robot("irb120")
+    q = model.lower + np.array(u) * (model.upper - model.lower)
+    q[4] = 0.0  # axes 4 and 6 aligned: only q4 + q6 is determined
+    target = irb120_pose(q)
+    found = closed_form_solutions(model, target, model.frame_index("ee"), parse_task("full"), hint=q)
+    assert found.solutions
+    for solution in found.solutions:
+        check_pose(irb120_pose, solution.q, target, (0, 1, 2, 3, 4, 5))
+    # with q as the hint, q4 stays at q[3] and q6 takes the rest: q itself is listed
+    assert any(same_modulo_turns(model, s.q, q) for s in found.solutions)
