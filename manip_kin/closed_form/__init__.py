@@ -147,62 +147,43 @@ def in_limit_variants(model: RobotModel, q) -> list[tuple[list[float], str]]:
     ]
 
 
-@dataclass(frozen=True)
-class _LimitArrays:
-    """The joint limits as arrays for :func:`_nearest_variant` (infinite limits as ±1e9)."""
-
-    lower: np.ndarray
-    upper: np.ndarray
-    wrapped: np.ndarray  # revolute with finite limits: shifted by whole turns into them
-    circular: np.ndarray  # revolute without finite limits: wrapped into (-π, π]
-    names: tuple[str, ...]
-
-
-def _limit_arrays(model: RobotModel) -> _LimitArrays:
-    key = (id(model), -2)
-    cached = _SOLVERS.get(key)
-    if cached is None or cached[0] is not model:
-        revolute = ~model.is_prismatic
-        finite = np.isfinite(model.lower) & np.isfinite(model.upper)
-        arrays = _LimitArrays(
-            lower=np.where(np.isfinite(model.lower), model.lower, -1e9),
-            upper=np.where(np.isfinite(model.upper), model.upper, 1e9),
-            wrapped=revolute & finite,
-            circular=revolute & ~finite,
-            names=tuple(model.joint_names),
-        )
-        cached = (model, arrays)
-        _SOLVERS[key] = cached
-    return cached[1]
-
-
-def _nearest_variant(model: RobotModel, raw: list, reference: np.ndarray) -> tuple[list[float], int, str] | None:
+def _nearest_variant(model: RobotModel, raw: list, reference: list[float]) -> tuple[list[float], int, str] | None:
     """The in-limit copy nearest to ``reference`` over every raw solution, and which one it copies.
 
-    The distance is a sum over joints, so each joint takes its own nearest whole-turn shift;
-    all raw solutions at once, as arrays.
+    The distance is a sum over joints, so each joint takes its own nearest whole-turn shift.
+    Plain floats: a few microseconds per branch.
     """
-    limits = _limit_arrays(model)
-    q = np.array([solution for solution, _ in raw], dtype=float)
+    joints = _joint_choices(model)
     turn = 2.0 * math.pi
-    base = np.where(limits.wrapped | limits.circular, np.remainder(q + math.pi, turn) - math.pi, q)
-    first = np.ceil((limits.lower - LIMIT_TOLERANCE - base) / turn)
-    last = np.floor((limits.upper + LIMIT_TOLERANCE - base) / turn)
-    turns = np.clip(np.round((reference - base) / turn), first, last)
-    values = np.where(limits.wrapped, np.clip(base + turn * turns, limits.lower, limits.upper), base)
-    inside = (q >= limits.lower - LIMIT_TOLERANCE) & (q <= limits.upper + LIMIT_TOLERANCE)
-    valid = np.where(limits.wrapped, first <= last, limits.circular | inside).all(axis=1)
-    values = np.where(limits.wrapped | limits.circular, values, np.clip(q, limits.lower, limits.upper))
-    distance = np.where(valid, ((values - reference) ** 2).sum(axis=1), np.inf)
-    index = int(np.argmin(distance))
-    if not np.isfinite(distance[index]):
+    best, best_distance, best_index = None, math.inf, -1
+    for index, (q, _) in enumerate(raw):
+        values, distance = [], 0.0
+        for (revolute, lower, upper, _name), value, wanted in zip(joints, q, reference):
+            if revolute:
+                value = wrap_to_pi(value)
+                if lower > -math.inf and upper < math.inf:
+                    first = math.ceil((lower - LIMIT_TOLERANCE - value) / turn)
+                    last = math.floor((upper + LIMIT_TOLERANCE - value) / turn)
+                    if first > last:
+                        break
+                    value = min(upper, max(lower, value + turn * min(last, max(first, round((wanted - value) / turn)))))
+            elif not lower - LIMIT_TOLERANCE <= value <= upper + LIMIT_TOLERANCE:
+                break
+            else:
+                value = min(upper, max(lower, value))
+            values.append(value)
+            distance += (value - wanted) ** 2
+        else:
+            if distance < best_distance:
+                best, best_distance, best_index = values, distance, index
+    if best is None:
         return None
-    suffix = "".join(
-        f" {name}{int(2 * t):+d}pi"
-        for name, t, wrapped in zip(limits.names, turns[index], limits.wrapped)
-        if wrapped and t != 0
-    )
-    return values[index].tolist(), index, suffix
+    suffix = ""
+    for (revolute, _, _, name), value, original in zip(joints, best, raw[best_index][0]):
+        turns = round((value - wrap_to_pi(original)) / turn) if revolute else 0
+        if turns:
+            suffix += f" {name}{turns * 2:+d}pi"
+    return best, best_index, suffix
 
 
 def task_error_function(model: RobotModel, target: np.ndarray, frame_index: int, task: Task):
@@ -298,7 +279,7 @@ def nearest_closed_form(
     if solver is None:
         return None
     name = f"closed_form:{solver.structure}"
-    reference = np.asarray(reference, dtype=float)
+    reference = [float(v) for v in reference]
     raw = solver.solve(target, reference)
     nearest = _nearest_variant(model, raw, reference) if raw else None
     if nearest is None:
