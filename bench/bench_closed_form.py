@@ -43,7 +43,7 @@ def run_closed_form_benchmarks(time_calls, repeats: int, ik_targets: int) -> lis
                 "metric": f"closed-form solve {label} ({solver.structure})",
                 **solve,
                 "target": "",
-                "reference": "opw_kinematics (C++) ~1 µs; ikfast ~5 µs",
+                "reference": "",
             }
         )
         listing = time_calls(
