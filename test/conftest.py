@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 # manip_kin.pipeline does not import rclpy, so the environment is still set before rclpy loads.
 from manip_kin.pipeline import pick_free_domain
@@ -24,6 +25,13 @@ os.environ["ROS_DOMAIN_ID"] = str(pick_free_domain())
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# Hypothesis: derandomized (examples are a fixed function of the test), so a failure reproduces
+# on any machine; print_blob lets one replay a failing example with @reproduce_failure.
+# HYPOTHESIS_PROFILE=explore searches with fresh random examples (and prints the seed it used).
+settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
+settings.register_profile("explore", deadline=None, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 @dataclass(frozen=True)

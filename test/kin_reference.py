@@ -101,3 +101,44 @@ def numeric_derivative(function, q, index: int, step: float = 1e-6):
 
 def unskew(matrix) -> np.ndarray:
     return np.array([matrix[2, 1] - matrix[1, 2], matrix[0, 2] - matrix[2, 0], matrix[1, 0] - matrix[0, 1]]) / 2.0
+
+
+def rotation_log(rotation) -> np.ndarray:
+    """Rotation vector of a rotation matrix (textbook: angle from the trace, axis from the skew
+    part); valid for angles well inside (0, π), which is where tests use it."""
+    angle = np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))
+    if angle < 1e-12:
+        return np.zeros(3)
+    return unskew(rotation) / np.sin(angle) * angle
+
+
+def numeric_geometric_jacobian(fk, q, step: float = 1e-6) -> np.ndarray:
+    """[angular; linear] Jacobian (6, n) in the base frame by central differences of ``fk(q) -> 4x4``."""
+    pose = fk(np.asarray(q, float))
+    columns = []
+    for index in range(len(q)):
+        derivative = numeric_derivative(fk, q, index, step)
+        columns.append(np.concatenate([unskew(derivative[:3, :3] @ pose[:3, :3].T), derivative[:3, 3]]))
+    return np.array(columns).T
+
+
+def resolved_rates(
+    jacobian, orientation_error, position_error, rows, gains=(0.8, 0.8), twist=None, damping=(0.04, 0.02)
+):
+    """The resolved-rate law written out plainly: v* = K e (+ feed-forward) on the task ``rows``,
+    q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ v* with λ² = λ_max² (1 - (σ_min / ε)²) below ε, else 0."""
+    angular, linear = (np.zeros(3), np.zeros(3)) if twist is None else twist
+    reference = np.concatenate(
+        [gains[0] * np.asarray(orientation_error) + angular, gains[1] * np.asarray(position_error) + linear]
+    )[list(rows)]
+    task = np.asarray(jacobian)[list(rows)]
+    sigma_min = np.linalg.svd(task, compute_uv=False)[-1]
+    damping_max, threshold = damping
+    lambda_squared = damping_max**2 * (1.0 - (sigma_min / threshold) ** 2) if sigma_min < threshold else 0.0
+    return task.T @ np.linalg.solve(task @ task.T + lambda_squared * np.eye(len(rows)), reference)
+
+
+def velocity_scaled(qdot, limits) -> np.ndarray:
+    """``qdot`` scaled by one factor into ``|q̇_i| <= limits_i``."""
+    ratio = np.max(np.abs(qdot) / np.asarray(limits))
+    return qdot / ratio if ratio > 1.0 else qdot

@@ -182,7 +182,6 @@ def test_joint_state_decoder_fast_path_and_fallbacks():
     decoder = conv.JointStateDecoder(names)
     first = serialize_message(conv.make_joint_state(names, [1.0, 2.0, 3.0], [0.0, 0.0, 0.0]))
     np.testing.assert_array_equal(decoder.positions(first), [1.0, 2.0, 3.0])
-    assert decoder._blob is not None  # learned the layout
     fast = serialize_message(conv.make_joint_state(names, [4.0, 5.0, 6.0]))
     np.testing.assert_array_equal(decoder.positions(fast), [4.0, 5.0, 6.0])
     # Other order and an extra joint: matched by name through the slow path.
@@ -197,6 +196,30 @@ def test_joint_state_decoder_fast_path_and_fallbacks():
         decoder.positions(serialize_message(conv.make_joint_state(names[:2], [1.0, 2.0])))
     with pytest.raises(conv.InvalidMessageError, match="3 names but 2 positions"):
         decoder.positions(serialize_message(conv.make_joint_state(names, [1.0, 2.0])))
+
+
+def test_joint_state_decoder_matches_rclpy_on_a_random_stream():
+    """One decoder fed a seeded stream of layouts (the fast path learns one, others fall back):
+    every answer equals rclpy's own deserialization matched by name."""
+
+    seed = 20261127
+    rng = np.random.default_rng(seed)
+    names = ["joint1", "j2", "joint_three", "a_long_joint_name_4"]
+    decoder = conv.JointStateDecoder(names)
+    fast_layout = conv.make_joint_state(names, [0.0] * 4, [0.0] * 4)
+    for index in range(300):
+        if rng.random() < 0.6:  # same layout as the learned one: new values only
+            message = conv.make_joint_state(names, rng.normal(size=4) * 3, rng.normal(size=4))
+        else:
+            order = list(rng.permutation(names)) + (["extra"] if rng.random() < 0.5 else [])
+            message = conv.make_joint_state(order, rng.normal(size=len(order)) * 3)
+            message.header.frame_id = "base_link" if rng.random() < 0.5 else ""
+            message.header.stamp.sec = int(rng.integers(0, 2**31 - 1))
+        data = serialize_message(message)
+        decoded = deserialize_message(data, JointState)
+        expected = [decoded.position[list(decoded.name).index(name)] for name in names]
+        np.testing.assert_array_equal(decoder.positions(data), expected, err_msg=f"seed {seed}, message {index}")
+    np.testing.assert_array_equal(decoder.positions(serialize_message(fast_layout)), [0.0] * 4)
 
 
 def test_problem_kind():

@@ -1,16 +1,24 @@
-"""cartesian_controller alone: commands from the control law, state on /diagnostics, rejections."""
+"""cartesian_controller alone: commands from the control law, state on /diagnostics, rejections.
+
+Expected commands are computed here, independently of manip_kin.control: FK of the controlled
+frame, a numeric Jacobian, a textbook rotation log and the damped least-squares law written out
+(kin_reference.resolved_rates), with the node's parameters. Every parameter that changes the
+command is set to a non-default value in some test whose expectation would be wrong if the node
+ignored it.
+"""
 
 import math
+import time
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from kin_reference import numeric_geometric_jacobian, resolved_rates, rotation_log, velocity_scaled
 from node_harness import Harness, statuses
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from manip_kin.control import CartesianController, ControllerConfig
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller import CartesianControllerNode
@@ -40,14 +48,31 @@ def _joint_state(q, names=None):
     return conv.make_joint_state(names, np.asarray(q)[order])
 
 
-def _expected(goal, twist=None, q=Q0):
-    return CartesianController(MODEL, ControllerConfig()).step(q, goal, twist, 1.0 / RATE).qdot
+def _expected(
+    goal,
+    twist=None,
+    q=Q0,
+    model=MODEL,
+    frame=None,
+    rows=range(6),
+    gains=(0.8, 0.8),
+    damping=(0.04, 0.02),
+    velocity_limits=True,
+):
+    """The command the law gives, computed without manip_kin.control (see the module docstring)."""
+    fk = lambda x: frame_pose(model, x, frame)  # noqa: E731
+    pose = fk(np.asarray(q, float))
+    orientation_error = rotation_log(goal[:3, :3] @ pose[:3, :3].T)
+    position_error = goal[:3, 3] - pose[:3, 3]
+    jacobian = numeric_geometric_jacobian(fk, q)
+    qdot = resolved_rates(jacobian, orientation_error, position_error, rows, gains, twist, damping)
+    return velocity_scaled(qdot, model.velocity_limits) if velocity_limits else qdot
 
 
-def _start(harness, **params):
+def _start(harness, robot="genova7", **params):
     commands = harness.collect(Float64MultiArray, "/joint_velocity_commands")
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
-    node = harness.start(CartesianControllerNode, robot="genova7", rate_hz=RATE, **params)
+    node = harness.start(CartesianControllerNode, robot=robot, rate_hz=RATE, **params)
     harness.wait_matched("/joint_states", JointState)
     harness.wait_matched("/goal_pose", PoseStamped)
     harness.wait_matched("/goal_twist", TwistStamped)
@@ -74,7 +99,7 @@ def test_zeros_without_joint_state_or_goal_then_tracks(harness):
     assert harness.spin_until(lambda: node.state in ("tracking", "joint-limited"), 3, every=stream)
     commands.clear()
     harness.spin_for(0.1, every=stream)
-    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-9)
+    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-7)
     assert np.linalg.norm(commands[-1].data) > 0.1
     status = harness.spin_until(
         lambda: [
@@ -104,11 +129,11 @@ def test_feed_forward_used_while_fresh(harness):
 
     harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
     harness.spin_for(0.3, every=stream, period=0.005)
-    np.testing.assert_allclose(commands[-1].data, _expected(GOAL, (angular, linear)), atol=1e-9)
-    assert not np.allclose(_expected(GOAL, (angular, linear)), _expected(GOAL))
+    np.testing.assert_allclose(commands[-1].data, _expected(GOAL, (angular, linear)), atol=1e-7)
+    assert np.abs(_expected(GOAL, (angular, linear)) - _expected(GOAL)).max() > 0.05
     # Twists stop: after goal_twist_timeout the pose error alone drives the command.
     harness.spin_for(0.2, every=lambda: harness.publish("/joint_states", _joint_state(Q0)))
-    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-9)
+    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-7)
 
 
 def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
@@ -133,7 +158,7 @@ def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
     )
     commands.clear()
     harness.spin_for(0.1, every=stream)
-    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-9)
+    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-7)
     logged = capfd.readouterr().err
     assert "NaN or infinity" in logged and "has length" in logged and "'world' is not the base frame" in logged
     assert "lacks joints" in logged
@@ -142,11 +167,116 @@ def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
 def test_converged_state(harness):
     node, commands, diagnostics = _start(harness, position_tolerance=1e-3, orientation_tolerance=1e-2)
     goal = frame_pose(MODEL, Q0)
-    goal[2, 3] += 5e-4  # within tolerance
+    goal[2, 3] += 5e-4  # within the (non-default) tolerance; the default 1e-4 would say tracking
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
     harness.publish("/goal_pose", conv.make_pose_stamped(goal, "base_link"))
     assert harness.spin_until(lambda: node.state == "converged", 3, every=stream)
     assert harness.spin_until(
         lambda: any(s.message == "converged" for s in statuses(diagnostics, "cartesian_controller")), 2, every=stream
     )
-    assert np.linalg.norm(commands[-1].data) < 0.01
+    # Converged still commands the law's small correction of the remaining 0.5 mm (not zeros,
+    # not something else): K e through the pseudo-inverse.
+    commands.clear()
+    harness.spin_for(0.05, every=stream)
+    expected = _expected(goal)
+    assert np.linalg.norm(expected) > 1e-4
+    np.testing.assert_allclose(commands[-1].data, expected, atol=1e-8)
+
+
+def test_gains_frame_task_and_base_frame_parameters(harness, capfd):
+    """Non-default gains, the ee frame, a position task and goals in 'world': all four change
+    the expected command, computed from the ee's FK and its position Jacobian."""
+    node, commands, _ = _start(
+        harness, gain_linear=1.7, gain_angular=0.3, frame="ee", task="position", base_frame="world"
+    )
+    stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
+    ee = frame_pose(MODEL, Q0, "ee")
+    goal = make_transform(rpy_to_matrix(0.3, 0.0, 0.2) @ ee[:3, :3], ee[:3, 3] + [0.03, -0.02, 0.04])
+    harness.publish("/goal_pose", conv.make_pose_stamped(goal, "base_link"))  # not the base frame now
+    harness.publish("/goal_pose", conv.make_pose_stamped(goal, "world"))
+    assert harness.spin_until(lambda: node.goal is not None and node.rejected_goals == 1, 3, every=stream)
+    commands.clear()
+    harness.spin_for(0.1, every=stream)
+    expected = _expected(goal, frame="ee", rows=(3, 4, 5), gains=(0.3, 1.7))
+    np.testing.assert_allclose(commands[-1].data, expected, atol=1e-7)
+    # Ignoring any one of them would give a different command.
+    for other in (
+        _expected(goal, frame="ee", rows=(3, 4, 5)),
+        _expected(goal, rows=(3, 4, 5), gains=(0.3, 1.7)),
+        _expected(goal, frame="ee", gains=(0.3, 1.7)),
+    ):
+        assert np.abs(other - expected).max() > 1e-3
+    assert "'base_link' is not the base frame" in capfd.readouterr().err
+
+
+def test_damping_parameters_at_a_singularity(harness):
+    """irb120 with the wrist singular (q5 = 0): λ_max and ε set the damped command."""
+    q = np.array([0.3, 0.2, -0.4, 0.5, 0.0, -0.2])
+    model = load_robot("irb120")
+    node, commands, _ = _start(
+        harness, robot="irb120", damping_max=0.2, singular_threshold=0.1, respect_velocity_limits=False
+    )
+    stream = lambda: harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q))  # noqa: E731
+    current = frame_pose(model, q)
+    goal = make_transform(rpy_to_matrix(0.0, 0.0, 0.4) @ current[:3, :3], current[:3, 3] + [0.02, -0.03, 0.01])
+    harness.publish("/goal_pose", conv.make_pose_stamped(goal, "base_link"))
+    assert harness.spin_until(lambda: node.state == "singular", 3, every=stream)
+    commands.clear()
+    harness.spin_for(0.1, every=stream)
+    expected = _expected(goal, q=q, model=model, damping=(0.2, 0.1), velocity_limits=False)
+    np.testing.assert_allclose(commands[-1].data, expected, atol=1e-6)
+    default = _expected(goal, q=q, model=model, velocity_limits=False)
+    assert np.abs(default - expected).max() > 1e-2  # the defaults would give another command
+
+
+def test_velocity_and_position_limit_switches(harness):
+    """respect_velocity_limits and respect_position_limits off: the raw law, over the limits."""
+    q = Q0.copy()
+    q[5] = 0.0  # the prismatic joint on its lower limit
+    node, commands, _ = _start(
+        harness, gain_linear=20.0, gain_angular=20.0, respect_velocity_limits=False, respect_position_limits=False
+    )
+    stream = lambda: harness.publish("/joint_states", _joint_state(q))  # noqa: E731
+    current = frame_pose(MODEL, q)
+    goal = make_transform(current[:3, :3], current[:3, 3] + [0.0, 0.0, -0.1])
+    raw = _expected(goal, q=q, gains=(20.0, 20.0), velocity_limits=False)
+    assert raw[5] < 0 and np.max(np.abs(raw) / MODEL.velocity_limits) > 1.0  # both limits matter here
+    harness.publish("/goal_pose", conv.make_pose_stamped(goal, "base_link"))
+    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    commands.clear()
+    harness.spin_for(0.1, every=stream)
+    np.testing.assert_allclose(commands[-1].data, raw, rtol=1e-6, atol=1e-6)
+
+
+def test_goal_timeout_drops_an_old_goal(harness):
+    node, commands, diagnostics = _start(harness, goal_timeout=0.3)
+    stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
+    assert harness.spin_until(lambda: node.state == "idle", 3, every=stream)
+    published = time.monotonic()
+    harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
+    assert harness.spin_until(lambda: node.state in ("tracking", "joint-limited"), 3, every=stream)
+    assert harness.spin_until(lambda: node.state == "stale input", 5, every=stream)
+    # A lower bound only: the node took the goal after it was published, so it cannot expire
+    # sooner than 0.3 s after that (a loaded machine can only make it later).
+    assert time.monotonic() - published > 0.3
+    assert node.detail.startswith("goal ") and node.detail.endswith(" s old")
+    commands.clear()
+    harness.spin_for(0.05, every=stream)
+    assert commands and not any(commands[-1].data)
+    # A new goal is taken again.
+    harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
+    assert harness.spin_until(lambda: node.state in ("tracking", "joint-limited"), 3, every=stream)
+
+
+def test_quaternion_tolerance_parameter(harness):
+    node, commands, _ = _start(harness, quaternion_tolerance=0.2)
+    stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
+    loose = conv.make_pose_stamped(GOAL, "base_link")
+    q = loose.pose.orientation
+    q.x, q.y, q.z, q.w = (1.1 * v for v in (q.x, q.y, q.z, q.w))  # length 1.1: within 0.2, not 0.01
+    harness.publish("/goal_pose", loose)
+    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    assert node.rejected_goals == 0
+    commands.clear()
+    harness.spin_for(0.1, every=stream)
+    np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-6)  # used normalised

@@ -1,10 +1,11 @@
 """Node plumbing without ROS traffic: the rate loop, log throttling, parameter checks, --help."""
 
 import subprocess
-import sys
+import sysconfig
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from manip_kin.errors import InvalidArgumentError
@@ -23,19 +24,26 @@ def test_rate_loop_runs_at_rate_survives_errors_and_stops():
 
     loop = RateLoop(200.0, cycle, errors.append, name="test_loop")
     loop.start()
-    time.sleep(0.5)
+    deadline = time.monotonic() + 30
+    while len(calls) < 100 and time.monotonic() < deadline:  # a condition, not a fixed sleep
+        time.sleep(0.01)
     loop.stop()
-    assert not loop.running
+    assert not loop.running  # joined: no cycle can follow
     count = len(calls)
-    time.sleep(0.05)
-    assert len(calls) == count  # stopped
-    assert 60 <= count <= 110  # ~100 cycles in 0.5 s at 200 Hz, on a shared machine
-    assert len(errors) == 1 and str(errors[0]) == "boom"
+    assert count >= 100
+    assert len(errors) == 1 and str(errors[0]) == "boom"  # the loop went on after the error
+    periods = np.diff(calls)
+    # The rate is the behaviour: the schedule is anchored to 5 ms deadlines, so the median period
+    # is 5 ms even when a loaded machine delays single cycles (those re-anchor, not catch up).
+    # 0.5 ms of margin: sleep overshoot on a busy 2-core machine is typically ~0.1 ms.
+    assert abs(np.median(periods) - 5e6) < 0.5e6, np.median(periods)
+    # The stats are those of the cycles that ran (the cycle's now_ns is its start time).
     stats = loop.stats()
-    assert stats.errors == 1 and stats.cycles == count - 1
-    assert 150 < stats.rate_hz < 210
-    assert stats.period_error_p99_ms >= 0 and stats.compute_mean_ms >= 0
-    with pytest.raises(ValueError):
+    assert stats.errors == 1 and stats.cycles == count - 1 and stats.samples == count - 1
+    assert stats.rate_hz == pytest.approx(1e9 / periods.mean(), rel=1e-12)
+    assert stats.period_error_max_ms == pytest.approx(np.abs(periods - 5e6).max() * 1e-6, rel=1e-12)
+    assert stats.compute_mean_ms >= 0
+    with pytest.raises(ValueError, match="rate"):
         RateLoop(0.0, cycle)
 
 
@@ -46,7 +54,7 @@ def test_throttled_log_keys_on_kind():
         log("length", "bad length")
         log("finite", "bad value")
     assert lines == ["bad length", "bad value"]
-    time.sleep(0.25)
+    time.sleep(0.25)  # the behaviour is the interval: anything longer than 0.2 s releases the kind
     log("length", "bad length")
     assert lines[-1] == "bad length (2 more like this since the last report)"
 
@@ -72,7 +80,7 @@ def test_param_spec_coercion():
 
 @pytest.mark.parametrize("executable", ["robot_state", "cartesian_controller", "trajectory_generator"])
 def test_help_lists_parameters_topics_and_example(executable):
-    path = Path(sys.executable).parent / executable
+    path = Path(sysconfig.get_path("scripts")) / executable
     result = subprocess.run([str(path), "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0
     text = result.stdout
@@ -84,7 +92,7 @@ def test_help_lists_parameters_topics_and_example(executable):
 
 
 def test_bad_parameter_exits_2_with_one_line():
-    path = Path(sys.executable).parent / "robot_state"
+    path = Path(sysconfig.get_path("scripts")) / "robot_state"
     result = subprocess.run(
         [str(path), "--ros-args", "-p", "robot:=nosuchbot"], capture_output=True, text=True, timeout=60
     )

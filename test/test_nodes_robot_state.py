@@ -36,6 +36,7 @@ def test_publishes_state_poses_twists_and_description(harness):
     tool_poses = harness.collect(PoseStamped, "/tool_pose")
     ee_twists = harness.collect(TwistStamped, "/ee_twist")
     tool_twists = harness.collect(TwistStamped, "/tool_twist")
+    started = time.time()
     harness.start(RobotStateNode, robot="genova7", rate_hz=200.0)
     assert harness.spin_until(
         lambda: len(joint_states) > 20 and len(tool_poses) > 20 and tool_twists and ee_twists and ee_poses, 10
@@ -51,11 +52,12 @@ def test_publishes_state_poses_twists_and_description(harness):
     q0 = model.start_configuration()
     np.testing.assert_allclose(state.position, q0, atol=1e-12)
     np.testing.assert_allclose(state.velocity, 0.0, atol=1e-12)
-    assert abs(stamp_to_seconds(state.header.stamp) - time.time()) < 1.0
+    assert started <= stamp_to_seconds(state.header.stamp) <= time.time()  # stamped with the system time
     stamps = [stamp_to_seconds(m.header.stamp) for m in joint_states]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
-    # 200 Hz: consecutive stamps ~5 ms apart on average.
-    assert 0.003 < (stamps[-1] - stamps[0]) / (len(stamps) - 1) < 0.008
+    # 200 Hz is the behaviour: the loop keeps 5 ms deadlines, so the median spacing is 5 ms even
+    # when single cycles are late on a loaded machine (0.5 ms margin for sleep overshoot).
+    assert abs(np.median(np.diff(stamps)) - 0.005) < 0.0005, np.median(np.diff(stamps))
 
     tool = tool_poses[-1]
     assert tool.header.frame_id == "base_link"
@@ -77,12 +79,23 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
     command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
     send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
-    harness.spin_for(0.6, every=send, period=0.01)
+    assert harness.spin_until(lambda: joint_states and joint_states[-1].position[0] > 0.05, 10, every=send)
     state = joint_states[-1]
     np.testing.assert_allclose(state.velocity, command, atol=1e-9)
     moved = np.array(state.position)
-    assert 0.2 * 0.3 < moved[0] < 0.2 * 0.8  # integrated for about 0.6 s of commands
     np.testing.assert_allclose(moved, command * (moved[0] / command[0]), atol=1e-9)  # moved along the command
+    # q advances by q̇ times the time between cycles, at most 3 periods after a stall (a simulated
+    # arm does not jump). Over 20 cycles the displacement is the command times the stamp
+    # differences so capped; 0.2 ms of margin: the stamp is read after the cycle's work, which a
+    # loaded machine delays (the error does not add up over the cycles, only the ends count).
+    moving = [m for m in joint_states if np.allclose(m.velocity, command, atol=1e-9)]
+    assert len(moving) > 20
+    elapsed = sum(
+        min(stamp_to_seconds(b.header.stamp) - stamp_to_seconds(a.header.stamp), 3 / 250)
+        for a, b in zip(moving[-21:], moving[-20:])
+    )
+    displacement = np.subtract(moving[-1].position, moving[-21].position)
+    np.testing.assert_allclose(displacement, command * elapsed, atol=2e-4 * np.abs(command).max())
     # Twist = J(q) q̇ at the same cycle (the ee twist message with the same stamp).
     by_stamp = {stamp_to_seconds(m.header.stamp): m for m in ee_twists}
     state = next(s for s in reversed(joint_states) if stamp_to_seconds(s.header.stamp) in by_stamp)
@@ -92,11 +105,14 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     np.testing.assert_allclose(twist_to_arrays(twist.twist)[0], angular, atol=1e-9)
     np.testing.assert_allclose(twist_to_arrays(twist.twist)[1], linear, atol=1e-9)
     # Commands stop: after command_timeout the arm holds still.
-    harness.spin_for(0.4)
+    stopped_sending = time.monotonic()
+    assert harness.spin_until(lambda: not any(joint_states[-1].velocity), 5)
+    assert time.monotonic() - stopped_sending > 0.1 - 0.01  # not before command_timeout (a lower bound)
     held = np.array(joint_states[-1].position)
-    np.testing.assert_allclose(joint_states[-1].velocity, 0.0)
-    harness.spin_for(0.2)
-    np.testing.assert_array_equal(joint_states[-1].position, held)
+    count = len(joint_states)
+    assert harness.spin_until(lambda: len(joint_states) >= count + 25, 5)  # 0.1 s of states at 250 Hz
+    for message in joint_states[count:]:
+        np.testing.assert_array_equal(message.position, held)
     np.testing.assert_allclose(pose_stamped_to_matrix(tool_poses[-1]), frame_pose(model, held), atol=1e-9)
 
 
@@ -108,15 +124,15 @@ def test_rejects_bad_commands_and_keeps_running(harness, capfd):
         harness.publish("/joint_velocity_commands", Float64MultiArray(data=[float(v) for v in bad]))
         harness.spin_for(0.05)
     assert harness.spin_until(lambda: node.rejected_commands == 5, 3)
-    harness.spin_for(0.2)
+    count = len(joint_states)
+    assert harness.spin_until(lambda: len(joint_states) > count + 10, 5)
     assert np.all(np.isfinite(joint_states[-1].position))
     np.testing.assert_allclose(joint_states[-1].position, 0.0)
     np.testing.assert_allclose(joint_states[-1].velocity, 0.0)
     # The node still obeys a good command afterwards.
-    harness.spin_for(
-        0.3, every=lambda: harness.publish("/joint_velocity_commands", Float64MultiArray(data=[0.5, 0, 0, 0, 0, 0]))
-    )
-    assert joint_states[-1].position[0] > 0.05
+    good = lambda: harness.publish("/joint_velocity_commands", Float64MultiArray(data=[0.5, 0, 0, 0, 0, 0]))  # noqa: E731
+    assert harness.spin_until(lambda: joint_states[-1].position[0] > 0.05, 10, every=good)
+    np.testing.assert_allclose(joint_states[-1].position[1:], 0.0)
     logged = capfd.readouterr().err
     assert "has 5 values; valid: 6" in logged and "NaN or infinity" in logged
 
@@ -130,7 +146,9 @@ def test_position_and_velocity_limits(harness):
     # Prismatic joint6 starts at 0.15 m; drive it down at its 0.5 m/s limit: it stops at 0.
     down = np.zeros(7)
     down[5] = -0.5
-    harness.spin_for(0.6, every=lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(down)))
+    push = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(down))  # noqa: E731
+    assert harness.spin_until(lambda: joint_states and joint_states[-1].position[5] == 0.0, 10, every=push)
+    harness.spin_for(0.05, every=push)  # still pushed down: it stays on the limit
     state = joint_states[-1]
     assert state.position[5] == 0.0 and state.velocity[5] == 0.0
     assert harness.spin_until(
@@ -143,7 +161,9 @@ def test_position_and_velocity_limits(harness):
     # 10 rad/s on joint1 and 1 rad/s on joint2: scaled together to joint1's 2 rad/s limit.
     fast = np.zeros(7)
     fast[0], fast[1] = 10.0, 1.0
-    harness.spin_for(0.3, every=lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(fast)))
+    push = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(fast))  # noqa: E731
+    assert harness.spin_until(lambda: joint_states[-1].velocity[0] > 0, 10, every=push)
+    harness.spin_for(0.05, every=push)
     np.testing.assert_allclose(joint_states[-1].velocity[:2], [2.0, 0.2], atol=1e-9)
     assert model.within_limits(joint_states[-1].position)
 

@@ -3,21 +3,22 @@
 import json
 import math
 import subprocess
-import sys
-import time
+import sysconfig
 from pathlib import Path
 
 import numpy as np
 import pytest
+from pipeline_checks import stop_checked
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
-from manip_kin.pipeline import Pipeline, fresh_domain_env, pipeline_processes
+from manip_kin.pipeline import Pipeline, fresh_domain_env, pick_free_domain, pipeline_processes
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, rpy_to_matrix
 
-MANIP_KIN = str(Path(sys.executable).parent / "manip_kin")
+MANIP_KIN = str(Path(sysconfig.get_path("scripts")) / "manip_kin")
 GENOVA_GOAL = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
 
 
@@ -34,22 +35,19 @@ def genova(tmp_path_factory):
     )
     pipeline.start()
     yield pipeline
-    codes = pipeline.stop()
-    assert all(code == 0 for code in codes.values()), codes
+    stop_checked(pipeline)
 
 
 def test_goal_wait_reaches_genova7_pose_goal(genova):
-    start = time.monotonic()
     result = run_cli(
         genova, "goal", "--xyz", "0.2", "-0.7", "0.3", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "40", "--json"
     )
-    elapsed = time.monotonic() - start
     assert result.returncode == 0, result.stderr + result.stdout
     payload = json.loads(result.stdout)
     assert payload["converged"] is True and payload["state"] == "converged"
     assert payload["final_error"]["position"] < 1e-4 and payload["final_error"]["orientation"] < 1e-3
-    # About the time pure exponential convergence at 0.8/s takes (no stall at the prismatic limit).
-    assert elapsed < 20.0
+    # How long it takes is the law's business, checked in simulated time (test_simulation: pure
+    # exponential convergence, no stall at the prismatic limit); wall time here is the machine's.
     model = load_robot("genova7")
     q = genova.client().current_positions()
     assert model.within_limits(q)
@@ -114,7 +112,7 @@ def test_cli_errors_exit_2(genova):
     quat = run_cli(genova, "goal", "--xyz", "0", "0", "0", "--quat", "0", "0", "0", "2")
     assert quat.returncode == 2 and "unit quaternion" in quat.stderr
     # Nobody listens on another domain: one line, exit 2.
-    env = dict(genova.env, ROS_DOMAIN_ID=str((int(genova.env["ROS_DOMAIN_ID"]) + 50) % 101 or 1))
+    env = dict(genova.env, ROS_DOMAIN_ID=str(pick_free_domain(exclude=[genova.env["ROS_DOMAIN_ID"]])))
     lonely = subprocess.run(
         [MANIP_KIN, "goal", "--xyz", "0.1", "0", "0.5", "--timeout", "1"],
         env=env,
@@ -126,19 +124,34 @@ def test_cli_errors_exit_2(genova):
     assert len(lonely.stderr.strip().splitlines()) == 1
 
 
+def test_goal_wait_timeout_exits_1(genova):
+    # From about [0.2, -0.65, 0.3] (the previous goal) 0.23 m away: the error decays as
+    # exp(-0.8 t) to the 1e-4 m tolerance in ln(0.23 / 1e-4) / 0.8 = 9.7 s. --timeout 4 (which
+    # also bounds discovery) ends the wait well before: a valid request not achieved, exit 1.
+    result = run_cli(
+        genova, "goal", "--xyz", "0.1", "-0.5", "0.45", "--rpy", "0", "1.57", "0", "--wait", "--timeout", "4"
+    )
+    assert result.returncode == 1, result.stderr + result.stdout
+    assert "NOT converged after" in result.stdout + result.stderr
+
+
 def test_controller_killed_and_restarted_recovers(genova):
     client = genova.client()
     far = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.15, -0.9, 0.35])
+    before = client.current_positions()
     client.send_goal(far)
-    client.spin_for(0.5)
+    assert client.spin_until(lambda: np.abs(client.current_positions() - before).max() > 1e-3, 10), "arm not moving"
     genova.kill_process("cartesian_controller")
     assert not genova.running("cartesian_controller")
     # Commands go stale after command_timeout (0.1 s): the arm stops where it is.
-    client.spin_for(0.3)
+    assert client.spin_until(lambda: (s := client.joint_state) is not None and not any(s.velocity), 5)
     first = client.current_positions()
-    client.spin_for(0.3)
-    np.testing.assert_array_equal(client.current_positions(), first)
-    assert client.joint_state is not None and not any(client.joint_state.velocity)
+    received = []
+    client.node.create_subscription(JointState, "/joint_states", received.append, 100)
+    assert client.spin_until(lambda: len(received) >= 50, 10)  # 0.1 s of states at 500 Hz, stopped
+    for message in received:
+        np.testing.assert_array_equal(message.position, first)
+        assert not any(message.velocity)
     genova.restart_process("cartesian_controller")
     assert client.wait_status("cartesian_controller").message in ("idle", "stale input")
     result = run_cli(

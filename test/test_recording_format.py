@@ -12,6 +12,7 @@ import json
 import re
 import shutil
 import subprocess
+import sysconfig
 import time
 from pathlib import Path
 
@@ -50,7 +51,9 @@ from manip_kin.recording.msgdef import (
 from manip_kin.recording.qos import default_offer, parse_profiles
 
 REPO = Path(__file__).resolve().parents[1]
-MANIP_KIN = REPO / ".venv" / "bin" / "manip_kin"
+# The console scripts of the interpreter running the tests (the venv make uses, or any other).
+SCRIPTS = Path(sysconfig.get_path("scripts"))
+MANIP_KIN = SCRIPTS / "manip_kin"
 T0 = 1_700_000_000_000_000_000  # ns since the epoch
 MS = 1_000_000
 

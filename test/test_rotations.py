@@ -153,9 +153,13 @@ def test_pseudo_inverses_left_right_plain_and_damped():
     np.testing.assert_allclose(damped_left_pinv(wide, damping), expected, atol=1e-12)
     b = rng.normal(size=3)
     np.testing.assert_allclose(damped_solve(wide, b, damping), expected @ b, atol=1e-12)
-    # a rank-deficient matrix still gives a finite damped inverse
+    # A rank-deficient matrix: the damped inverse is V diag(σ / (σ² + λ²)) Uᵀ from the SVD, the
+    # zero singular value contributing nothing (finite, not 1/0).
     singular = np.array([[1.0, 0.0], [1.0, 0.0]])
-    assert np.all(np.isfinite(damped_right_pinv(singular, 0.1)))
+    u, sigma, vt = np.linalg.svd(singular)
+    expected = vt.T @ np.diag(sigma / (sigma**2 + 0.1**2)) @ u.T
+    np.testing.assert_allclose(damped_right_pinv(singular, 0.1), expected, atol=1e-12)
+    np.testing.assert_allclose(expected, [[1 / (2 + 0.01), 1 / (2 + 0.01)], [0.0, 0.0]], atol=1e-15)
 
 
 @given(unit_vectors)

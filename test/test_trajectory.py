@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.errors import InvalidArgumentError, NonFiniteError, NotARotationError
 from manip_kin.kinematics import frame_pose
 from manip_kin.robots import load_robot
 from manip_kin.rotations import (
@@ -103,6 +103,56 @@ def test_zero_length_line_is_instant():
 
 
 @pytest.mark.parametrize("kind", TIME_SCALINGS)
+def test_zero_length_pure_rotation_line(kind):
+    """Same position, other orientation: the angular limits alone size the motion."""
+    goal = make_transform(rpy_to_matrix(0.2, -0.4, 1.0 + 0.9), START[:3, 3])
+    angle = np.linalg.norm(matrix_to_rotvec(goal[:3, :3] @ START[:3, :3].T))
+    line = LineTrajectory.plan(START, goal, kind, LIMITS)
+    assert line.length == 0.0 and line.duration > 0.0
+    t, _, sdot, sddot = _rates(line.scaling)
+    # Peak angular rate at (not above) its limit for the constant and trapezoidal profiles' cruise.
+    assert sdot.max() * angle <= LIMITS.max_angular_velocity * (1 + 1e-9)
+    if kind != "constant":
+        assert np.abs(sddot).max() * angle <= LIMITS.max_angular_acceleration * (1 + 1e-9)
+        active = max(
+            sdot.max() * angle / LIMITS.max_angular_velocity,
+            np.abs(sddot).max() * angle / LIMITS.max_angular_acceleration,
+        )
+        assert active > 0.999  # the fastest profile within the angular limits
+    else:
+        assert math.isclose(line.duration, angle / LIMITS.max_angular_velocity)
+    for time in np.linspace(0.0, line.duration, 7):
+        pose, (angular, linear) = line.sample(time)
+        np.testing.assert_array_equal(pose[:3, 3], START[:3, 3])  # the position never moves
+        assert not linear.any()
+        s_value, s_rate, _ = line.scaling.evaluate(time)
+        expected = quat_to_matrix(quat_slerp(matrix_to_quat(START[:3, :3]), matrix_to_quat(goal[:3, :3]), s_value))
+        np.testing.assert_allclose(pose[:3, :3], expected, atol=1e-9)
+        # ω is about the fixed rotation axis at s' times the total angle.
+        axis = matrix_to_rotvec(goal[:3, :3] @ START[:3, :3].T) / angle
+        np.testing.assert_allclose(angular, axis * angle * s_rate, atol=1e-9)
+    np.testing.assert_allclose(line.sample(line.duration)[0], goal, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["trapezoidal", "cubic", "quintic"])
+def test_angular_acceleration_limit_sizes_a_rotation_heavy_line(kind):
+    """A short move with a large rotation under a low angular acceleration: that limit decides."""
+    limits = MotionLimits(
+        max_linear_velocity=1.0, max_linear_acceleration=10.0, max_angular_velocity=5.0, max_angular_acceleration=0.5
+    )
+    length, angle = 0.01, 1.2
+    scaling = make_time_scaling(kind, length, angle, limits)
+    _, _, sdot, sddot = _rates(scaling)
+    peak_angular_acceleration = np.abs(sddot).max() * angle
+    assert peak_angular_acceleration <= 0.5 * (1 + 1e-9)
+    assert peak_angular_acceleration == pytest.approx(0.5, rel=1e-3)  # active
+    assert sdot.max() * angle < 5.0 and np.abs(sddot).max() * length < 10.0  # the others are not
+    # Without that limit the same move is faster: the limit was what made it slow.
+    loose = MotionLimits(1.0, 10.0, 5.0, 50.0)
+    assert make_time_scaling(kind, length, angle, loose).duration < scaling.duration
+
+
+@pytest.mark.parametrize("kind", TIME_SCALINGS)
 def test_sample_positions_on_segment_and_orientation_is_slerp(kind):
     line = LineTrajectory.plan(START, GOAL, kind, LIMITS)
     np.testing.assert_allclose(line.sample(0.0)[0], START, atol=1e-12)
@@ -139,11 +189,11 @@ def test_bad_inputs_raise():
         MotionLimits(max_linear_velocity=0.0)
     bad = START.copy()
     bad[0, 3] = math.nan
-    with pytest.raises(Exception, match="NaN"):
+    with pytest.raises(NonFiniteError, match="start pose contains NaN or infinity"):
         LineTrajectory.plan(bad, GOAL)
     skewed = START.copy()
     skewed[:3, :3] *= 2.0
-    with pytest.raises(Exception, match="not a rotation"):
+    with pytest.raises(NotARotationError, match=r"start pose rotation is not a rotation matrix \(det 8,"):
         LineTrajectory(skewed, GOAL, make_time_scaling("cubic", 1, 0, LIMITS))
 
 

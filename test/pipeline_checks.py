@@ -1,0 +1,50 @@
+"""Helpers for tests that run node processes: checked teardown and the realtime privilege."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+
+from manip_kin.pipeline import Pipeline
+
+
+def stop_checked(pipeline: Pipeline) -> None:
+    """Stop every node; each must exit with 0 (a node that crashed or hung is a failure)."""
+    codes = pipeline.stop()
+    failed = {name: code for name, code in codes.items() if code != 0}
+    tails = "\n".join(f"--- {name} ---\n{pipeline.log_tail(name)}" for name in failed)
+    assert not failed, f"nodes exited with {failed}:\n{tails}"
+
+
+@contextlib.contextmanager
+def checked_pipeline(processes, **kwargs):
+    """``with Pipeline(processes, **kwargs)`` that also asserts exit code 0 of every node at the end.
+
+    The check runs only when the body passed: a failing body's own error is the one reported.
+    """
+    pipeline = Pipeline(processes, **kwargs).start()
+    try:
+        yield pipeline
+    except BaseException:
+        pipeline.stop()
+        raise
+    stop_checked(pipeline)
+
+
+def realtime_scheduling_error(priority: int = 10) -> str:
+    """'' when this process may run a thread at SCHED_FIFO ``priority`` (CAP_SYS_NICE or RLIMIT_RTPRIO),
+    else why not. Tried in a throwaway thread, as the nodes' RateLoop does for its loop thread."""
+    outcome: list[str] = []
+
+    def attempt() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            outcome.append("")
+        except (OSError, AttributeError) as error:
+            outcome.append(f"SCHED_FIFO {priority} refused: {error}")
+
+    thread = threading.Thread(target=attempt)
+    thread.start()
+    thread.join()
+    return outcome[0]
