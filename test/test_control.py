@@ -363,6 +363,48 @@ def test_joint_at_either_limit_with_an_outward_rate_is_held(joint, side):
     assert held == 3 and inward == 3, (held, inward)
 
 
+SPINNER_URDF = """<robot name="spinner">
+  <link name="base_link"/><link name="link1"/><link name="link2"/><link name="tool0"/>
+  <joint name="spin" type="continuous">
+    <parent link="base_link"/><child link="link1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit effort="1" velocity="2.0"/>
+  </joint>
+  <joint name="elbow" type="revolute">
+    <parent link="link1"/><child link="link2"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="1" velocity="2.0"/>
+  </joint>
+  <joint name="flange" type="fixed">
+    <parent link="link2"/><child link="tool0"/><origin xyz="0.2 0 0"/>
+  </joint>
+</robot>"""
+
+
+def test_continuous_joint_is_driven_through_plus_minus_pi(tmp_path):
+    """A continuous base joint: no limit at ±π, the law is 2π-periodic in it, and a goal on the
+    other side of π is reached by passing through π (not by unwinding the long way round)."""
+    from manip_kin.simulation import simulate
+
+    path = tmp_path / "spinner.urdf"
+    path.write_text(SPINNER_URDF)
+    model = load_robot(str(path))
+    assert np.isinf(model.lower[0]) and np.isinf(model.upper[0])
+    config = ControllerConfig(task="x,y", gain_linear=2.0)
+    controller = CartesianController(model, config)
+    start = np.array([math.pi - 0.05, 0.6])
+    goal = frame_pose(model, np.array([math.pi + 0.3, 0.6]))
+    for q in (start, np.array([math.pi + 0.01, 0.6]), np.array([-math.pi - 0.2, 0.6])):
+        output = controller.step(q, goal, dt=0.001)
+        wrapped = controller.step(q - 2 * math.pi * np.sign(q[0]) * np.array([1, 0]), goal, dt=0.001)
+        np.testing.assert_allclose(output.qdot, wrapped.qdot, atol=1e-9)
+        assert output.limited_joints == ()
+    result = simulate(model, start, goal, config, dt=0.001, duration=10.0, record_every=1)
+    assert result.converged, result.reason
+    assert result.q[:, 0].max() > math.pi  # it went through π ...
+    assert np.all(np.diff(result.q[: len(result.time), 0]) >= -1e-12)  # ... monotonically, not the long way
+    assert result.q_final[0] == pytest.approx(math.pi + 0.3, abs=1e-5)
+    assert not result.limited[:, 0].any()
+
+
 # --- singularities ------------------------------------------------------------------------
 
 

@@ -307,9 +307,31 @@ def test_target_only_reachable_past_a_limit_is_reported_as_limits():
     assert result.q[2] == 0.0
 
 
-def test_time_budget_stops_the_restarts():
+def test_time_budget_stops_the_restarts(monkeypatch):
+    import manip_kin.ik as ik_module
+
     model = load_robot("rpp")
     target = make_transform(np.eye(3), [0.35, -0.1, 0.4])
+    # Generate (and cache) the model's IK code first: the budget is about solving, and code
+    # generation on a loaded machine can take longer than the whole budget.
+    solve_ik(model, target, np.zeros(3), restarts=0)
+    # The budget logic on a clock the test controls: every reading advances 5 ms, so the
+    # 20 ms budget is spent after a known number of readings, however fast the machine is.
+    readings = []
+
+    def clock():
+        readings.append(len(readings) * 0.005)
+        return readings[-1]
+
+    monkeypatch.setattr(ik_module.time, "perf_counter", clock)
+    result = solve_ik(model, target, np.zeros(3), restarts=10**6, time_budget=0.02, seed=7)
+    monkeypatch.undo()
+    assert not result.success and result.reason.startswith("budget: the time budget of 0.02 s ran out")
+    # One reading at the start, one after each attempt; the one that reaches 20 ms ends it.
+    assert result.attempts == 4, (result.attempts, readings)
+    assert result.elapsed == pytest.approx(readings[-1] - readings[0])
+    # And on the real clock: it stops (not 10^6 restarts), some restarts in. 0.5 s bound: the
+    # budget plus one attempt (~1 ms here) with room for a descheduled process on a loaded machine.
     result = solve_ik(model, target, np.zeros(3), restarts=10**6, time_budget=0.02, seed=7)
     assert not result.success and result.reason.startswith("budget:")
     assert 1 < result.attempts < 10**6

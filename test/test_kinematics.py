@@ -216,6 +216,26 @@ def test_batched_fk_equals_single_fk(name):
         np.testing.assert_allclose(batched, single, atol=1e-12)
 
 
+@pytest.mark.parametrize("frame", ["tool", "3", "base"])
+def test_batched_fk_across_its_block_boundary_and_for_no_configurations(frame):
+    """N = one block + 5 (the last block partly filled, after a full one) and N = 0."""
+    from manip_kin.kinematics import _BATCH_BLOCK
+
+    model = load_robot("genova7")
+    rng = np.random.default_rng(21)
+    configurations = np.array([model.random_configuration(rng) for _ in range(_BATCH_BLOCK + 5)])
+    batched = batch_frame_pose(model, configurations, frame)
+    index = model.frame_index(frame)
+    assert batched.shape == (_BATCH_BLOCK + 5, 4, 4)
+    # Every pose, the ones either side of the boundary included, against the single-pose chain.
+    for i in list(range(0, _BATCH_BLOCK + 5, 97)) + list(range(_BATCH_BLOCK - 3, _BATCH_BLOCK + 5)):
+        np.testing.assert_allclose(batched[i], frame_poses(model, configurations[i])[index], atol=1e-12, err_msg=i)
+    # The partial block must not show the previous block's values: a shorter batch gives the same.
+    np.testing.assert_array_equal(batch_frame_pose(model, configurations[_BATCH_BLOCK:], frame), batched[_BATCH_BLOCK:])
+    empty = batch_frame_pose(model, np.zeros((0, model.dof)), frame)
+    assert empty.shape == (0, 4, 4)
+
+
 def test_workspace_reuse_gives_the_same_answers():
     model = load_robot("genova7")
     data = KinematicsData(model)

@@ -8,6 +8,7 @@ ignored it.
 """
 
 import math
+import os
 import time
 
 import numpy as np
@@ -280,3 +281,21 @@ def test_quaternion_tolerance_parameter(harness):
     commands.clear()
     harness.spin_for(0.1, every=stream)
     np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-6)  # used normalised
+
+
+def test_realtime_priority_reports_whether_it_was_applied(harness):
+    """realtime_priority needs CAP_SYS_NICE (or an RLIMIT_RTPRIO): where this machine refuses it,
+    the loop runs normally and says why in realtime_error; where it permits it, the loop thread
+    is SCHED_FIFO (read back from the kernel)."""
+    from pipeline_checks import realtime_scheduling_error
+
+    refused = realtime_scheduling_error(10)
+    node, commands, _ = _start(harness, realtime_priority=10)
+    assert harness.spin_until(lambda: node.loop.stats().cycles > 5, 5)
+    if refused:
+        assert "SCHED_FIFO priority 10 not set" in node.loop.realtime_error
+        print(f"SCHED_FIFO refused on this machine, checked the fallback: {refused}")
+    else:
+        assert node.loop.realtime_error == ""
+        assert os.sched_getscheduler(node.loop._thread.native_id) == os.SCHED_FIFO
+    assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way

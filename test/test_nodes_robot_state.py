@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from kin_reference import unskew
 from node_harness import Harness, statuses
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -78,7 +79,12 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, command_timeout=0.1)
     harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
     command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
-    send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
+    last_sent = [0.0]
+
+    def send():
+        harness.publish("/joint_velocity_commands", array_to_multiarray(command))
+        last_sent[0] = time.monotonic()
+
     assert harness.spin_until(lambda: joint_states and joint_states[-1].position[0] > 0.05, 10, every=send)
     state = joint_states[-1]
     np.testing.assert_allclose(state.velocity, command, atol=1e-9)
@@ -105,9 +111,9 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     np.testing.assert_allclose(twist_to_arrays(twist.twist)[0], angular, atol=1e-9)
     np.testing.assert_allclose(twist_to_arrays(twist.twist)[1], linear, atol=1e-9)
     # Commands stop: after command_timeout the arm holds still.
-    stopped_sending = time.monotonic()
     assert harness.spin_until(lambda: not any(joint_states[-1].velocity), 5)
-    assert time.monotonic() - stopped_sending > 0.1 - 0.01  # not before command_timeout (a lower bound)
+    # Not before command_timeout: the node took the last command after it was sent (a lower bound).
+    assert time.monotonic() - last_sent[0] > 0.1
     held = np.array(joint_states[-1].position)
     count = len(joint_states)
     assert harness.spin_until(lambda: len(joint_states) >= count + 25, 5)  # 0.1 s of states at 250 Hz
@@ -181,3 +187,88 @@ def test_bad_parameters_stop_the_node(harness):
         RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100
     )  # integers accepted
     np.testing.assert_allclose(node.integrator.q, [0, 1, 0, 0, 0, 0])
+
+
+def _numeric_twist(model, q, qdot, frame, step=1e-6):
+    """(ω, v) of ``frame`` in base moving with ``qdot``: central difference of FK along q̇."""
+    plus = frame_pose(model, q + step * qdot, frame)
+    minus = frame_pose(model, q - step * qdot, frame)
+    derivative = (plus - minus) / (2 * step)
+    return unskew(derivative[:3, :3] @ frame_pose(model, q, frame)[:3, :3].T), derivative[:3, 3]
+
+
+def test_ee_and_tool_twists_of_a_moving_arm_with_a_tool(harness):
+    """genova7 has a tool: both twists, each against numeric differentiation of its own FK."""
+    model = load_robot("genova7")
+    assert model.has_tool
+    joint_states = harness.collect(JointState, "/joint_states")
+    ee_twists = harness.collect(TwistStamped, "/ee_twist")
+    tool_twists = harness.collect(TwistStamped, "/tool_twist")
+    harness.start(RobotStateNode, robot="genova7", rate_hz=250.0)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    command = np.array([0.3, -0.2, 0.25, 0.4, -0.3, 0.05, 0.5])
+    send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
+
+    def matched():
+        ee = {stamp_to_seconds(m.header.stamp): m for m in ee_twists}
+        tool = {stamp_to_seconds(m.header.stamp): m for m in tool_twists}
+        for state in reversed(joint_states):
+            key = stamp_to_seconds(state.header.stamp)
+            if np.allclose(state.velocity, command, atol=1e-9) and key in ee and key in tool:
+                return state, ee[key], tool[key]
+        return None
+
+    state, ee, tool = harness.spin_until(matched, 10, every=send)
+    q, qdot = np.array(state.position), np.array(state.velocity)
+    for message, frame in ((ee, "ee"), (tool, "tool")):
+        angular, linear = _numeric_twist(model, q, qdot, frame)
+        received = twist_to_arrays(message.twist)
+        np.testing.assert_allclose(received[0], angular, atol=1e-7, err_msg=frame)
+        np.testing.assert_allclose(received[1], linear, atol=1e-7, err_msg=frame)
+    # The tool sits away from the ee: its linear velocity differs by ω × (p_tool - p_ee).
+    lever = frame_pose(model, q, "tool")[:3, 3] - frame_pose(model, q, "ee")[:3, 3]
+    assert np.linalg.norm(lever) > 0.01
+    np.testing.assert_allclose(
+        twist_to_arrays(tool.twist)[1],
+        twist_to_arrays(ee.twist)[1] + np.cross(twist_to_arrays(ee.twist)[0], lever),
+        atol=1e-9,
+    )
+
+
+SPINNER_URDF = """<robot name="spinner">
+  <link name="base_link"/><link name="link1"/><link name="link2"/>
+  <joint name="spin" type="continuous">
+    <parent link="base_link"/><child link="link1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit effort="1" velocity="2.0"/>
+  </joint>
+  <joint name="elbow" type="revolute">
+    <parent link="link1"/><child link="link2"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-2.5" upper="2.5" effort="1" velocity="2.0"/>
+  </joint>
+</robot>"""
+
+
+def test_continuous_joint_integrates_through_plus_minus_pi(harness, tmp_path):
+    """No limit at ±π: the position keeps growing past π (no clamp, no wrap) and the pose
+    follows the FK of the unwrapped angle."""
+    path = tmp_path / "spinner.urdf"
+    path.write_text(SPINNER_URDF)
+    model = load_robot(str(path))
+    joint_states = harness.collect(JointState, "/joint_states")
+    ee_poses = harness.collect(PoseStamped, "/ee_pose")
+    harness.start(RobotStateNode, robot=str(path), rate_hz=250.0, initial_positions=[math.pi - 0.1, 0.5])
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    command = np.array([2.0, 0.0])  # its velocity limit
+    send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
+    assert harness.spin_until(lambda: joint_states and joint_states[-1].position[0] > math.pi + 0.3, 10, every=send)
+    positions = [m.position[0] for m in joint_states]
+    assert all(b >= a for a, b in zip(positions, positions[1:]))  # through π without a jump to -π
+    state = joint_states[-1]
+    np.testing.assert_allclose(state.velocity, command, atol=1e-9)
+    by_stamp = {stamp_to_seconds(m.header.stamp): m for m in ee_poses}
+    for message in joint_states[-20:]:
+        pose = by_stamp.get(stamp_to_seconds(message.header.stamp))
+        if pose is not None:
+            np.testing.assert_allclose(
+                pose_stamped_to_matrix(pose), frame_pose(model, np.array(message.position)), atol=1e-9
+            )

@@ -382,7 +382,7 @@ def test_periodic_flush_puts_messages_on_disk_before_close(tmp_path):
     writer = RecordingWriter(tmp_path / "open.mcap", flush_interval_s=0.05)
     for i in range(30):
         writer.write("/joint_states", make_messages(i)["/joint_states"], log_time_ns=T0 + i * MS)
-    time.sleep(0.06)
+    time.sleep(0.06)  # longer than the 50 ms flush interval (the behaviour is that interval)
     writer.write("/joint_states", JointState(), log_time_ns=T0 + 30 * MS)  # triggers the due flush
     # Copy the file as a SIGKILL would leave it: the writer is still open.
     shutil.copy(tmp_path / "open.mcap", tmp_path / "killed.mcap")

@@ -65,11 +65,19 @@ def start_recorder(processes: list, output: Path, *parameters: str) -> subproces
     return process
 
 
-def wait_subscribed(publishers: list, process: subprocess.Popen, timeout: float = 20.0) -> None:
+def wait_subscribed(node, publishers: list, process: subprocess.Popen, timeout: float = 20.0) -> None:
+    """Until the recorder's own subscription is matched on every publisher's topic.
+
+    By node name: in a full test session another subscriber of /joint_states may still be up,
+    and a count > 0 would then not mean the recorder listens.
+    """
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         assert process.poll() is None, f"recorder exited early: {process.communicate()[1]}"
-        if all(p.get_subscription_count() > 0 for p in publishers):
+        if all(
+            any(info.node_name == "recorder" for info in node.get_subscriptions_info_by_topic(p.topic_name))
+            for p in publishers
+        ) and all(p.get_subscription_count() > 0 for p in publishers):
             return
         time.sleep(0.05)
     raise AssertionError("the recorder never subscribed")
@@ -106,7 +114,7 @@ def test_signal_ends_with_complete_file_holding_every_message(ros, processes, tm
     states = ros.create_publisher(JointState, "/joint_states", 100)
     output = tmp_path / output_name
     recorder = start_recorder(processes, output, "topics:=[/joint_states,/robot_description,/diagnostics]")
-    wait_subscribed([states, description], recorder)
+    wait_subscribed(ros, [states, description], recorder)
     published = 150
     send_times = []
     for i in range(published):
@@ -115,6 +123,7 @@ def test_signal_ends_with_complete_file_holding_every_message(ros, processes, tm
     # Acknowledged by the recorder's (reliable, 2000 deep) reader = in its queue; the
     # recorder takes what is queued before it completes the file on the signal.
     assert states.wait_for_all_acked(Duration(seconds=30)), "the recorder did not acknowledge every message"
+    assert description.wait_for_all_acked(Duration(seconds=30)), "the latched description was not delivered"
     signalled_at = time.time_ns()
     recorder.send_signal(stop_signal)
     _, stderr = recorder.communicate(timeout=30)
@@ -149,7 +158,7 @@ def test_sigkill_then_salvage_recovers_all_but_the_last_second(ros, processes, t
     states = ros.create_publisher(JointState, "/joint_states", 100)
     output = tmp_path / "killed.mcap"
     recorder = start_recorder(processes, output, "topics:=[/joint_states]")
-    wait_subscribed([states], recorder)
+    wait_subscribed(ros, [states], recorder)
     rate_hz, kill_after_s = 200.0, 4.0
     send_times = []
     start = time.monotonic()
@@ -289,7 +298,7 @@ def test_max_messages_ends_the_recording_by_itself(ros, processes, tmp_path):
     )
     output = tmp_path / "limited.mcap"
     recorder = start_recorder(processes, output, "all_topics:=true", "max_messages:=40", "compression:=none")
-    wait_subscribed([states], recorder)
+    wait_subscribed(ros, [states], recorder)
     for i in range(200):
         states.publish(joint_state(ros, i))
         time.sleep(0.002)

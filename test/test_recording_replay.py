@@ -13,13 +13,13 @@ listener's scheduling under load is not.
 
 from __future__ import annotations
 
-import statistics
 import subprocess
 import sysconfig
 import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -115,15 +115,17 @@ def wait_for(predicate, timeout: float = 20.0) -> None:
         time.sleep(0.02)
 
 
-def _timing_errors(arrivals: list, rate: float) -> list[float]:
-    """Per message: arrival time minus its recorded offset / rate, minus the median of that [s].
+def _pacing(arrivals: list, rate: float) -> tuple[float, np.ndarray]:
+    """Least-squares line through (recorded offset, publish time): its slope times ``rate``
+    (1.0 = the recorded spacing divided by the rate) and each message's residual [s].
 
-    Relative to the median rather than to the first message, so one late first
-    delivery does not shift every other message's error.
+    A fit over all messages rather than message-to-message gaps: the pacing is the slope, which
+    jitter of single wake-ups on a loaded machine barely moves (31 points over >= 0.6 s).
     """
-    lags = [arrival - (log_time - LOG_TIMES[0]) / 1e9 / rate for (arrival, _), log_time in zip(arrivals, LOG_TIMES)]
-    reference = statistics.median(lags)
-    return [lag - reference for lag in lags]
+    recorded = np.array([(t - LOG_TIMES[0]) / 1e9 for t in LOG_TIMES[: len(arrivals)]])
+    published = np.array([arrival for arrival, _ in arrivals])
+    slope, intercept = np.polyfit(recorded, published, 1)
+    return slope * rate, published - (slope * recorded + intercept)
 
 
 def test_replay_reproduces_messages_timing_and_qos(recording, listener):
@@ -137,13 +139,14 @@ def test_replay_reproduces_messages_timing_and_qos(recording, listener):
     wait_for(lambda: len(states) == len(LOG_TIMES))
     assert [m.position[0] for _, m in states] == [float(i) for i in range(len(LOG_TIMES))], result.stderr
     assert [(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec) for _, m in states] == LOG_TIMES
-    # The timing is the behaviour: replay sleeps until each message's recorded offset. Its
-    # median error stays within 10 ms (the 20 ms shortest gap keeps order, pacing is not
-    # systematically off); one message may be late by a descheduled replay process on a
-    # loaded 2-core machine, hence the looser per-message bound .
-    errors = _timing_errors(states, 1.0)
-    assert statistics.median(abs(e) for e in errors) < 0.010, errors
-    assert max(abs(e) for e in errors) < 0.2, errors
+    # The timing is the behaviour: replay sleeps until each message's recorded offset. The
+    # spacing matches to 3 % (a wrong rate factor is off by 50 % or more); the typical wake-up
+    # error stays under 20 ms (10.8 ms was seen with the whole suite and a benchmark running) and
+    # no message is off by 0.2 s (a descheduled replay process on a loaded 2-core machine).
+    scale, residuals = _pacing(states, 1.0)
+    assert scale == pytest.approx(1.0, rel=0.03), residuals
+    assert np.median(np.abs(residuals)) < 0.020, residuals
+    assert np.abs(residuals).max() < 0.2, residuals
     assert [m.data for _, m in description] == ["<robot name='r'/>"]
 
 
@@ -155,11 +158,10 @@ def test_rate_two_halves_the_duration_and_clock_follows_the_recording(recording,
     assert "replay:" not in result.stderr
     wait_for(lambda: len(states) == len(LOG_TIMES))
     assert len(states) == len(LOG_TIMES)
-    # Margins as in the test above: the median error is the pacing, the span is the
-    # first-to-last spacing (0.6 s at rate 2) with one late message's 0.1 s allowed for.
-    span = states[-1][0] - states[0][0]
-    assert span == pytest.approx(DURATION_S / 2, abs=0.1)
-    assert statistics.median(abs(e) for e in _timing_errors(states, 2.0)) < 0.010
+    # Margins as in the test above.
+    scale, residuals = _pacing(states, 2.0)
+    assert scale == pytest.approx(1.0, rel=0.03), residuals
+    assert np.median(np.abs(residuals)) < 0.020, residuals
     times = [m.clock.sec * 10**9 + m.clock.nanosec for _, m in clock]
     assert len(times) > 20
     assert times == sorted(times)
@@ -199,9 +201,10 @@ def test_rate_below_one_stretches_the_recording(recording, listener):
     assert result.returncode == 0, result.stderr
     wait_for(lambda: len(states) == len(LOG_TIMES))
     assert [m.position[0] for _, m in states] == [float(i) for i in range(len(LOG_TIMES))]
-    # 1.2 s recorded take 2.4 s at half speed (at rate 1 or 2 this would be off by >= 1.2 s).
-    assert states[-1][0] - states[0][0] == pytest.approx(DURATION_S / 0.5, abs=0.1)
-    assert statistics.median(abs(e) for e in _timing_errors(states, 0.5)) < 0.010
+    # 1.2 s recorded take 2.4 s at half speed (margins as above).
+    scale, residuals = _pacing(states, 0.5)
+    assert scale == pytest.approx(1.0, rel=0.03), residuals
+    assert np.median(np.abs(residuals)) < 0.020, residuals
 
 
 def _rosbags_positions(path: Path) -> list[float]:
