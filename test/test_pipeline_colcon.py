@@ -7,8 +7,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from pipeline_checks import checked_pipeline
 
-from manip_kin.pipeline import Pipeline, pipeline_processes
+from manip_kin.pipeline import pipeline_processes
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -24,7 +25,7 @@ def test_installed_pipeline_reaches_goal(installed, tmp_path):
     params_file = share / "config" / "genova7_pipeline.yaml"
     assert params_file.is_file()
     processes = pipeline_processes("genova7", params_file=str(params_file))
-    with Pipeline(processes, executable_dir=lib, env=env, log_dir=tmp_path) as pipeline:
+    with checked_pipeline(processes, executable_dir=lib, env=env, log_dir=tmp_path) as pipeline:
         # The nodes run the installed code, not the source tree.
         for name in ("robot_state", "cartesian_controller"):
             command_line = Path(f"/proc/{pipeline.pid(name)}/cmdline").read_bytes().split(b"\0")

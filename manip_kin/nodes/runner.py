@@ -71,6 +71,11 @@ def run_node(
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except Exception:
+            # A signal's context shutdown can land while spin() builds its wait set, which then
+            # raises RCLError ("context is not valid") instead of ExternalShutdownException.
+            if node.context.ok():
+                raise
     finally:
         if node is not None:
             if on_shutdown is not None:
