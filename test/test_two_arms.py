@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from manip_kin.kinematics import frame_pose
-from manip_kin.pipeline import NodeProcess, Pipeline, pipeline_processes
+from manip_kin.pipeline import NodeProcess, Pipeline, PipelineClient, pipeline_processes
 from manip_kin.plotting import load_run
 from manip_kin.recording import read_info, read_messages
 from manip_kin.robots import load_robot
@@ -151,3 +151,33 @@ def test_cli_goal_namespace_errors_are_one_line_exit_2(two_arms, namespace, mess
     )
     assert result.returncode == 2 and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_replay_moves_one_arms_recorded_topics_into_another_namespace(two_arms):
+    pipelines, recorder, out = two_arms
+    recorder.stop_process("recorder", timeout=10.0)  # the recording is complete (idempotent)
+    env = pipelines["/right"].env
+    mixed = subprocess.run(
+        [MANIP_KIN, "replay", str(out), "--namespace", "/mirror", "--quiet"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert mixed.returncode == 2 and "/left, /right" in mixed.stderr and "--topics" in mixed.stderr
+    irb120 = load_robot("irb120")
+    client = PipelineClient(env=env, namespace="/mirror", watch_state=True)
+    try:
+        replay = subprocess.Popen(
+            [MANIP_KIN, "replay", str(out), "--namespace", "mirror", "--topics", "/right/joint_states", "--quiet"],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        heard = client.spin_until(lambda: client.joint_state, 30)
+        assert heard is not None and list(heard.name) == irb120.joint_names
+        replay.terminate()
+        replay.communicate(timeout=30)
+    finally:
+        client.close()

@@ -110,7 +110,7 @@ def run_replay(args: argparse.Namespace) -> int:
 
     remaps = parse_remaps(args.remap)
     if args.namespace is not None:
-        remaps = {**namespace_remaps(args.file, args.namespace), **remaps}
+        remaps = {**namespace_remaps(args.file, args.namespace, args.topics), **remaps}
     options = ReplayOptions(
         rate=args.rate,
         loop=args.loop,
@@ -129,12 +129,18 @@ def run_replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def namespace_remaps(path: str, namespace: str) -> dict[str, str]:
-    """Recorded topic → the same manip_kin topic in ``namespace``, for every manip_kin topic of ``path``.
+def namespace_remaps(path: str, namespace: str, topics: list[str] | None = None) -> dict[str, str]:
+    """Recorded topic → the same manip_kin topic in ``namespace``, for the manip_kin topics of ``path``.
 
     A manip_kin topic is one whose last name part is a pipeline topic (``joint_states``,
     ``goal_pose``...); global topics (``/diagnostics``, ``/tf``) and others keep their names.
+    Only ``topics`` are considered when given.
+
+    Raises:
+        InvalidArgumentError: the considered topics come from pipelines in several namespaces
+            (they would land on the same topics); name one pipeline's topics with ``--topics``.
     """
+    from manip_kin.errors import InvalidArgumentError
     from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
     from manip_kin.pipeline.client import normalize_namespace
     from manip_kin.recording.reader import read_info
@@ -142,8 +148,15 @@ def namespace_remaps(path: str, namespace: str) -> dict[str, str]:
     prefix = normalize_namespace(namespace)
     relative = {name for name in PIPELINE_TOPIC_TYPES if not name.startswith("/")}
     remaps = {}
+    sources = set()
     for topic in read_info(path).topics:
-        name = topic.name
-        if name.rsplit("/", 1)[-1] in relative:
-            remaps[name] = f"{prefix}/{name.rsplit('/', 1)[-1]}"
+        recorded_namespace, _, name = topic.name.rpartition("/")
+        if name in relative and (topics is None or topic.name in topics):
+            remaps[topic.name] = f"{prefix}/{name}"
+            sources.add(recorded_namespace or "/")
+    if len(sources) > 1:
+        raise InvalidArgumentError(
+            f"--namespace: {path} holds pipelines in {', '.join(sorted(sources))}, which would land on the same "
+            f"topics; valid: pick one pipeline's topics with --topics (e.g. --topics {sorted(remaps)[0]} ...)"
+        )
     return remaps

@@ -54,7 +54,14 @@ def run_node(
     if wants_help(argv, usage):
         return 0
     # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin().
-    rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
+    try:
+        rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
+    except RuntimeError as error:  # rcl cannot parse the --ros-args (e.g. a list mixing 0 and 0.3)
+        reason = str(error).split(", at /")[0]
+        if "same type" in reason:
+            reason += " (a list of numbers needs one type: write 0.0, not 0, next to 0.3)"
+        print(f"error: {reason}", file=sys.stderr)
+        return 2
     node = None
     exit_code = 0
     try:
