@@ -154,7 +154,7 @@ def bench_nodes() -> list[dict]:
 
 
 def bench_recorder() -> list[dict]:
-    from manip_kin.recording import benchmark_recorder, benchmark_writer
+    from recorder import benchmark_recorder, benchmark_writer
 
     rows = [
         {

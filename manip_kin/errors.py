@@ -1,6 +1,12 @@
-"""The manip_kin exceptions: one base class, one subclass per kind of mistake.
+"""The manip_kin exceptions: one base class, two families, one subclass per kind of mistake.
 
-Every message says what was received and what would have been valid, so a
+* :class:`InputError` (also a ``ValueError``): the request cannot be valid as given — a bad
+  argument, parameter, robot description or file. A CLI or a node exits with code 2.
+* :class:`OperationError` (also a ``RuntimeError``): a valid request that could not be carried
+  out — a node that died, a wait that timed out, a recording that could not be written.
+  Exit code 1.
+
+Every message says what was received and what would have been valid (or what failed), so a
 CLI or a node can print it on one line as it is.
 """
 
@@ -9,11 +15,29 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 
-class ManipKinError(ValueError):
-    """Base class of every error manip_kin raises for bad input."""
+class ManipKinError(Exception):
+    """Base class of every error manip_kin raises."""
 
 
-class UnknownRobotError(ManipKinError):
+class InputError(ManipKinError, ValueError):
+    """A request that cannot be valid as given (exit code 2): argument, parameter, file."""
+
+
+class OperationError(ManipKinError, RuntimeError):
+    """A valid request that could not be carried out (exit code 1)."""
+
+
+#: Process exit codes: 2 for an :class:`InputError`, 1 for any other failure.
+EXIT_INPUT_ERROR = 2
+EXIT_FAILURE = 1
+
+
+def exit_code_for(error: BaseException) -> int:
+    """The process exit code for an error: 2 for bad input, 1 for a failure."""
+    return EXIT_INPUT_ERROR if isinstance(error, InputError) else EXIT_FAILURE
+
+
+class UnknownRobotError(InputError):
     """A robot name that is neither bundled nor an existing file."""
 
     def __init__(self, name: str, available: Iterable[str]):
@@ -25,7 +49,7 @@ class UnknownRobotError(ManipKinError):
         )
 
 
-class UnknownFrameError(ManipKinError):
+class UnknownFrameError(InputError):
     """A frame name or index the model does not have."""
 
     def __init__(self, frame: object, valid: Iterable[str]):
@@ -34,7 +58,7 @@ class UnknownFrameError(ManipKinError):
         super().__init__(f"unknown frame {frame!r}; valid frames: {', '.join(self.valid)}")
 
 
-class JointCountError(ManipKinError):
+class JointCountError(InputError):
     """A joint vector whose length does not match the model."""
 
     def __init__(self, what: str, received: int, expected: int):
@@ -43,18 +67,18 @@ class JointCountError(ManipKinError):
         super().__init__(f"{what} has {received} values, the robot has {expected} joints")
 
 
-class NotARotationError(ManipKinError):
+class NotARotationError(InputError):
     """A 3x3 matrix that is not a proper rotation (orthonormal, det +1)."""
 
 
-class NonFiniteError(ManipKinError):
+class NonFiniteError(InputError):
     """An input holding NaN or infinity."""
 
     def __init__(self, what: str):
         super().__init__(f"{what} contains NaN or infinity; only finite values are valid")
 
 
-class ModelFileError(ManipKinError):
+class ModelFileError(InputError):
     """A robot description (YAML or URDF) that cannot be used, with file and field."""
 
     def __init__(self, source: str, field: str, problem: str):
@@ -64,7 +88,7 @@ class ModelFileError(ManipKinError):
         super().__init__(f"{source}: field '{field}': {problem}")
 
 
-class InvalidArgumentError(ManipKinError):
+class InvalidArgumentError(InputError):
     """A parameter outside its valid range (a negative gain, a zero time step, ...)."""
 
 

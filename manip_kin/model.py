@@ -23,7 +23,7 @@ from enum import Enum
 import numpy as np
 
 from manip_kin.errors import JointCountError, ModelFileError, UnknownFrameError, check_finite
-from manip_kin.rotations import rot_z, rotation_z_onto
+from manip_kin.rotations import rotation_z_onto
 
 
 class JointType(str, Enum):
@@ -279,24 +279,3 @@ class RobotModel:
         if self.initial_positions is not None:
             return np.array(self.initial_positions)
         return self.clip_to_limits(np.zeros(self.dof))
-
-
-def revolute_z(name: str, origin: np.ndarray, **kwargs) -> Joint:
-    """A revolute joint about its own z axis (the robots.md joint-list convention)."""
-    return Joint(name=name, type=JointType.REVOLUTE, origin=origin, **kwargs)
-
-
-def joint_motion(joint: Joint, position: float) -> np.ndarray:
-    """The 4x4 motion of one joint at ``position``: a rotation about or translation along its axis.
-
-    Straightforward reference used by tests and by the URDF export; the fast path is
-    :mod:`manip_kin.kinematics`.
-    """
-    motion = np.eye(4)
-    axis = np.asarray(joint.axis, dtype=float)
-    if joint.is_revolute:
-        align = rotation_z_onto(axis)
-        motion[:3, :3] = align @ rot_z(position) @ align.T
-    else:
-        motion[:3, 3] = axis * position
-    return motion

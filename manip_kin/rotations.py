@@ -269,11 +269,6 @@ def transform_from_xyz_rpy(xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)) -> np.ndarr
     return make_transform(rpy_to_matrix(*rpy), xyz)
 
 
-def transform_from_xyz_quat(xyz, quat_xyzw) -> np.ndarray:
-    """4x4 transform from a position [m] and a quaternion ``(x, y, z, w)``."""
-    return make_transform(quat_to_matrix(quat_xyzw), xyz)
-
-
 def invert_transform(transform) -> np.ndarray:
     """Inverse of a rigid transform, using ``Rᵀ`` rather than a general matrix inverse."""
     t = np.asarray(transform, dtype=float)

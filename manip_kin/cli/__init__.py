@@ -2,7 +2,8 @@
 
 Each sub-command lives in its own module exposing ``register(subparsers)``,
 which adds an argparse parser whose ``run`` default is ``run(args) -> int``.
-Errors a user can make are reported on one line on stderr with exit code 2.
+Errors are reported on one line on stderr: exit code 2 for bad input (an
+:class:`~manip_kin.errors.InputError`), 1 for a valid request that failed.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from manip_kin.errors import ManipKinError
+from manip_kin.errors import ManipKinError, exit_code_for
 
 # Order is the order of `manip_kin --help`.
 COMMAND_MODULES = (
@@ -23,10 +24,6 @@ COMMAND_MODULES = (
     "manip_kin.cli.plot_commands",
     "manip_kin.cli.demo_command",
 )
-
-
-class CliError(ManipKinError):
-    """A command line argument that cannot be used (one line, exit code 2)."""
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
@@ -66,7 +63,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.run(args) or 0)
     except ManipKinError as error:
         print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
-        return 2
+        return exit_code_for(error)
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

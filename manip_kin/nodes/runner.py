@@ -13,6 +13,8 @@ from collections.abc import Callable, Sequence
 
 from rclpy.node import Node
 
+from manip_kin.errors import EXIT_INPUT_ERROR, ManipKinError, exit_code_for
+
 
 def wants_help(argv: Sequence[str], usage: str) -> bool:
     """Print ``usage`` and return True when the user asked for ``--help``.
@@ -45,7 +47,10 @@ def run_node(
 
     Returns:
         The process exit code: 0 after a clean stop, 2 when the node could not
-        be configured (bad parameter), with the reason logged on one line.
+        be configured (bad parameter, robot or file: a ``ValueError``, which every
+        :class:`~manip_kin.errors.InputError` is), 1 when it could not start for
+        another reason (a :class:`~manip_kin.errors.ManipKinError` such as an
+        :class:`~manip_kin.errors.OperationError`); the reason is printed on one line.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -67,9 +72,12 @@ def run_node(
     try:
         try:
             node = make_node()
-        except ValueError as error:  # includes manip_kin errors: bad robot, bad parameter
+        except ValueError as error:  # bad parameter, robot or file (InputError is a ValueError)
             print(f"error: {error}", file=sys.stderr)
-            return 2
+            return EXIT_INPUT_ERROR
+        except ManipKinError as error:  # a valid configuration that could not be carried out
+            print(f"error: {error}", file=sys.stderr)
+            return exit_code_for(error)
         except (KeyboardInterrupt, ExternalShutdownException):  # stopped while waiting (robot_description)
             return 0
         executor = SingleThreadedExecutor()

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from manip_kin.errors import ManipKinError
+from manip_kin.errors import OperationError
 
 
-class PipelineError(ManipKinError):
+class PipelineError(OperationError):
     """A node that did not start, died, or a wait that timed out."""

@@ -6,8 +6,6 @@
   ``for topic, msg, log_time_ns, publish_time_ns in read_messages(path, topics=[...])``.
 * :func:`read_info` is ``manip_kin info``; :func:`salvage` recovers a truncated file.
 * :func:`manip_kin.recording.replay.replay` is ``manip_kin replay``.
-* :func:`benchmark_writer` measures the write cost per message, :func:`benchmark_recorder`
-  the recorder node's loss and CPU under a synthetic load (both for ``make bench``).
 
 The recorder node is :mod:`manip_kin.nodes.recorder`.
 """
@@ -25,8 +23,6 @@ from manip_kin.recording.reader import (
 from manip_kin.recording.writer import RecordingSummary, RecordingWriter
 
 __all__ = [
-    "benchmark_recorder",
-    "benchmark_writer",
     "CorruptRecordingError",
     "MessageDefinitionError",
     "RecordedMessage",
@@ -40,13 +36,3 @@ __all__ = [
     "read_messages",
     "salvage",
 ]
-
-
-def __getattr__(name: str):
-    # Lazy, so that `python -m manip_kin.recording.bench` (the bench's load publisher) does not
-    # find its own module already imported by this package.
-    if name in ("benchmark_writer", "benchmark_recorder"):
-        from manip_kin.recording import bench
-
-        return getattr(bench, name)
-    raise AttributeError(f"module 'manip_kin.recording' has no attribute {name!r}")

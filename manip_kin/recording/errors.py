@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from manip_kin.errors import ManipKinError
+from manip_kin.errors import InputError
 
 
-class RecordingError(ManipKinError):
-    """A recording (MCAP file or bag directory) that cannot be read or written."""
+class RecordingError(InputError):
+    """A recording (MCAP file or bag directory) or recording option that cannot be used as given."""
 
 
 class CorruptRecordingError(RecordingError):

@@ -126,8 +126,8 @@ def publish_load(rate_hz: float, duration_s: float, n_topics: int, depth: int = 
     """Publish one message per topic every ``1/rate_hz`` s for ``duration_s`` (the bench's load).
 
     Waits (up to ``wait_s``) until every topic has a subscriber first. Returns the
-    number of messages published. Run in its own process (``python -m
-    manip_kin.recording.bench publish RATE DURATION TOPICS``) so that its CPU is
+    number of messages published. Run in its own process (``python
+    bench/recorder.py publish RATE DURATION TOPICS``) so that its CPU is
     not the recorder's.
     """
     import rclpy
@@ -216,8 +216,7 @@ def benchmark_recorder(rate_hz: float = 1000.0, duration_s: float = 8.0, n_topic
         load = subprocess.Popen(
             [
                 sys.executable,
-                "-m",
-                "manip_kin.recording.bench",
+                str(Path(__file__).resolve()),
                 "publish",
                 str(rate_hz),
                 str(duration_s),
