@@ -21,11 +21,13 @@ One step, from the joint positions ``q`` and a goal pose (plus an optional goal 
 5. Velocity limits: the whole ``q̇`` is scaled by one factor so every joint is within its
    limit; the direction of motion (and of the cartesian velocity) is kept.
 
-The hot path runs on plain floats: the model's unrolled kinematics
-(:func:`manip_kin.kinematics.compiled_kinematics`) and an unrolled damped solve
-(:func:`manip_kin.unrolled_linalg.damped_solver`); numpy only builds the output arrays.
-Near a singularity (ruled out cheaply by ``det`` and ``tr`` of ``J Jᵀ``, see
-:func:`manip_kin.unrolled_linalg.smallest_eigenvalue_bound`) ``σ_min`` is computed exactly.
+The law runs as one generated function per model and configuration
+(:func:`manip_kin.fast_step.step_source`) on plain floats: the model's unrolled kinematics,
+the pose error with the rotation vector of :mod:`manip_kin.rotations`, and the unrolled
+damped solve; numpy only builds the output arrays. Near a singularity (ruled out cheaply by
+``det`` and ``tr`` of ``J Jᵀ``, see :func:`manip_kin.unrolled_linalg.smallest_eigenvalue_bound`)
+it calls the one damped least-squares solve (:class:`manip_kin.damped_least_squares.DampedSolver`),
+which computes ``σ_min`` exactly; at a position limit it calls :meth:`CartesianController._redistribute`.
 """
 
 from __future__ import annotations
@@ -36,13 +38,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.errors import InvalidArgumentError, JointCountError, NonFiniteError
+from manip_kin.damped_least_squares import DampedSolver
+from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError
 from manip_kin.fast_step import compile_step
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
-from manip_kin.rotations import matrix_to_rotvec, quaternion_from_entries
+from manip_kin.rotations import matrix_to_rotvec, rotvec_from_entries
 from manip_kin.tasks import Task, parse_task
-from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
 
 
 @dataclass(frozen=True)
@@ -121,25 +123,12 @@ class ControlOutput:
         return float(math.sqrt(float(self.position_error @ self.position_error)))
 
 
-def _rotvec_of(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float]:
-    """Rotation vector of a rotation matrix given by its entries (the math of
-    :func:`manip_kin.rotations.matrix_to_rotvec` on plain floats: ``2 atan2(|v|, w) v / |v|``
-    of the quaternion, exact near 0 and π)."""
-    x, y, z, w = quaternion_from_entries(m00, m01, m02, m10, m11, m12, m20, m21, m22)
-    vector_norm = math.sqrt(x * x + y * y + z * z)
-    if vector_norm < 1e-8 * abs(w):
-        scale = 2.0 / w
-    else:
-        scale = 2.0 * math.atan2(vector_norm, w) / vector_norm
-    return x * scale, y * scale, z * scale
-
-
 def _pose_error_values(pose: Sequence[float], goal: Sequence[Sequence[float]]) -> tuple[float, ...]:
     """``(e_o, e_p)`` as six floats from a flat row-major 4x4 ``pose`` (>= 12 values) and goal rows."""
     r00, r01, r02, px, r10, r11, r12, py, r20, r21, r22, pz = pose[:12]
     (g00, g01, g02, gx), (g10, g11, g12, gy), (g20, g21, g22, gz) = goal[0], goal[1], goal[2]
     # E = R_goal · Rᵀ: E_ij = goal row i · current row j.
-    rx, ry, rz = _rotvec_of(
+    rx, ry, rz = rotvec_from_entries(
         g00 * r00 + g01 * r01 + g02 * r02,
         g00 * r10 + g01 * r11 + g02 * r12,
         g00 * r20 + g01 * r21 + g02 * r22,
@@ -189,24 +178,6 @@ def _feed_forward_values(goal_twist) -> list[float]:
     return values
 
 
-def _output(qdot, error, manipulability, damping, scale, limited, singular) -> ControlOutput:
-    errors = np.array(error)
-    # A frozen dataclass's __init__ sets each field through object.__setattr__; filling
-    # __dict__ at once builds the same object for a fraction of the cost (hot path).
-    output = object.__new__(ControlOutput)
-    output.__dict__.update(
-        qdot=np.array(qdot),
-        orientation_error=errors[:3],
-        position_error=errors[3:],
-        manipulability=manipulability,
-        damping=damping,
-        velocity_scale=scale,
-        limited_joints=limited,
-        singular=singular,
-    )
-    return output
-
-
 def _goal_rows(goal_pose) -> list[list[float]]:
     """The goal pose as 4 rows of 4 floats, validated cheaply."""
     try:
@@ -244,76 +215,32 @@ class CartesianController:
         self._n = n
         self._rows = rows
         self._chain = compiled_kinematics(model, self.frame_index, True)
-        # The general path reads every Jacobian entry from the chain's output, so that the
-        # columns of joints held at a limit can be zeroed there.
-        self._solve_any = damped_solver(self._chain, n, rows, inverse_trace=True, fold_constants=False)
-        self._fused_step = compile_step(
-            self._chain,
-            n,
-            rows,
-            ControlOutput,
-            gain_angular=float(config.gain_angular),
-            gain_linear=float(config.gain_linear),
-            epsilon_sq=config.singular_threshold**2,
-            lower=model.lower.tolist() if config.respect_position_limits else None,
-            upper=model.upper.tolist() if config.respect_position_limits else None,
-            inverse_velocity_limits=(1.0 / model.velocity_limits).tolist() if config.respect_velocity_limits else None,
-        )
-        self._gain_angular = float(config.gain_angular)
-        self._gain_linear = float(config.gain_linear)
-        self._respect_position_limits = bool(config.respect_position_limits)
-        self._respect_velocity_limits = bool(config.respect_velocity_limits)
         self._lower = model.lower.tolist()
         self._upper = model.upper.tolist()
         self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
         self._epsilon_sq = config.singular_threshold**2
         self._damping_max_sq = config.damping_max**2
+        # The one damped least-squares solve (exact σ_min, Chiaverini's damping) for the cases
+        # the generated step's certificate does not clear, and for the SNS re-solves.
+        self._solver = DampedSolver(self._chain, n, rows)
+        self._step = compile_step(
+            self._chain,
+            n,
+            rows,
+            ControlOutput,
+            solve=self._solve_uncertified,
+            redistribute=self._redistribute,
+            gain_angular=float(config.gain_angular),
+            gain_linear=float(config.gain_linear),
+            epsilon_sq=self._epsilon_sq,
+            lower=self._lower if config.respect_position_limits else None,
+            upper=self._upper if config.respect_position_limits else None,
+            inverse_velocity_limits=self._inverse_velocity_limits if config.respect_velocity_limits else None,
+        )
 
-    # --- the damped least-squares solve ---------------------------------------------------
-
-    def _task_jacobian(self, values: Sequence[float]) -> np.ndarray:
-        """The task rows of the Jacobian in a chain output, shape (m, n)."""
-        return np.array(values[16:]).reshape(6, self._n)[list(self._rows)]
-
-    def _certified(self, result: tuple, size: int) -> bool:
-        """True when a solve's ``(x, det, tr, tr⁻¹)`` proves σ_min >= ε (so λ = 0) without
-        eigenvalues: λ_min >= det·((m-1)/tr)^(m-1) and λ_min >= 1/tr((JJᵀ)⁻¹)."""
-        _, determinant, trace, inverse_trace = result
-        if smallest_eigenvalue_bound(determinant, trace, size) >= self._epsilon_sq:
-            return True
-        return inverse_trace * self._epsilon_sq <= 1.0
-
-    def _damping_for(self, gram: np.ndarray) -> tuple[float, float, float]:
-        """``(σ_min, λ², manipulability)`` of a Gram matrix ``J Jᵀ``, from its eigenvalues."""
-        if not np.all(np.isfinite(gram)):
-            raise NonFiniteError("the Jacobian (q or the model)")
-        eigenvalues = np.linalg.eigvalsh(gram)
-        sigma_min = math.sqrt(max(float(eigenvalues[0]), 0.0))
-        manipulability = math.sqrt(float(np.prod(np.maximum(eigenvalues, 0.0))))
-        damping_sq = self._damping_max_sq * max(0.0, 1.0 - sigma_min * sigma_min / self._epsilon_sq)
-        return sigma_min, damping_sq, manipulability
-
-    def _solve_general(self, values: Sequence[float], rhs: list) -> tuple[list, float, bool, float]:
-        """``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` with λ from σ_min, J read from ``values`` (whose
-        columns of joints held at a limit may be zeroed).
-
-        Returns:
-            ``(qdot, λ, singular, manipulability)``.
-        """
-        result = self._solve_any(values, rhs, 0.0)
-        if result is not None and self._certified(result, len(rhs)):
-            return result[0], 0.0, False, math.sqrt(result[1])
-        # Possibly near a singularity: decide the damping from the exact σ_min.
-        jacobian = self._task_jacobian(values)
-        sigma_min, damping_sq, manipulability = self._damping_for(jacobian @ jacobian.T)
-        if sigma_min >= self.config.singular_threshold and result is not None:
-            return result[0], 0.0, False, manipulability
-        damped = self._solve_any(values, rhs, damping_sq) if damping_sq > 0.0 else None
-        if damped is not None:
-            return damped[0], math.sqrt(damping_sq), True, manipulability
-        # No damping configured at an exact singularity: the minimum-norm least-squares rates.
-        rates = np.linalg.lstsq(jacobian, np.asarray(rhs, dtype=float), rcond=1e-12)[0].tolist()
-        return rates, math.sqrt(damping_sq), True, manipulability
+    def _solve_uncertified(self, values: Sequence[float], rhs: list) -> tuple[list, float, bool, float]:
+        """The damped solve when the step's certificate failed: ``(qdot, λ, singular, manipulability)``."""
+        return self._solver.solve(values, rhs, self._epsilon_sq, self._damping_max_sq, try_certificate=False)
 
     # --- the control step -----------------------------------------------------------------
 
@@ -342,63 +269,35 @@ class CartesianController:
         else:
             goal = _goal_rows(goal_pose)
         feed_forward = _NO_FEED_FORWARD if goal_twist is None else _feed_forward_values(goal_twist)
-        fused_step = self._fused_step
-        if fused_step is not None:
-            # The generated step returns None, or raises, whenever anything is unusual (a
-            # wrong q length, a non-finite value, dt <= 0, a singularity, a limit); the
-            # general path then validates the input and handles every case.
-            try:
-                output = fused_step(q_values, goal, feed_forward, dt)
-            except (ArithmeticError, ValueError):
-                output = None
-            if output is not None:
-                return output
-        return self._step_general(q_values, goal, feed_forward, dt)
-
-    def _step_general(self, q_values: list, goal: list, feed_forward: Sequence[float], dt: float) -> ControlOutput:
-        """Every case of the control law: damping near singularities, position limits, scaling."""
-        if len(q_values) != self._n:
-            raise JointCountError("q", len(q_values), self._n)
-        if not 0.0 < dt < _INFINITY:
-            raise InvalidArgumentError(f"dt = {dt!r}; valid: a finite period > 0 [s]")
-        if not math.isfinite(sum(q_values)):
-            raise NonFiniteError("q")
-        values = self._chain(q_values)
         try:
-            error = _pose_error_values(values, goal)
+            output = self._step(q_values, goal, feed_forward, dt)
+        except (ArithmeticError, ValueError):
+            output = None  # the input is unusable (a wrong q length, a degenerate goal): say why
+        if output is None:
+            raise self._input_error(q_values, goal, feed_forward, dt)
+        return output
+
+    def _input_error(self, q_values: list, goal: list, feed_forward: Sequence[float], dt: float) -> ManipKinError:
+        """What is wrong with an input the generated step refused."""
+        if len(q_values) != self._n:
+            return JointCountError("q", len(q_values), self._n)
+        if not 0.0 < dt < _INFINITY:
+            return InvalidArgumentError(f"dt = {dt!r}; valid: a finite period > 0 [s]")
+        if not math.isfinite(sum(q_values)):
+            return NonFiniteError("q")
+        try:
+            error = _pose_error_values(self._chain(q_values), goal)
         except ZeroDivisionError:
-            raise InvalidArgumentError(
-                "goal_pose rotation is not a rotation matrix; valid: orthonormal with det +1"
-            ) from None
-        gains = (self._gain_angular,) * 3 + (self._gain_linear,) * 3
-        reference = [gains[i] * error[i] + feed_forward[i] for i in range(6)]
-        rhs = [reference[r] for r in self._rows]
-        if not math.isfinite(sum(rhs)):
-            raise NonFiniteError("the goal pose or the goal twist")
-
-        qdot, damping, singular, manipulability = self._solve_general(values, rhs)
-
-        limited: tuple[int, ...] = ()
-        if self._respect_position_limits:
-            for rate, position, low, high in zip(qdot, q_values, self._lower, self._upper):
-                if (position + rate * dt < low) if rate < 0.0 else (position + rate * dt > high):
-                    qdot, limited, damping, singular = self._redistribute(
-                        q_values, values, rhs, qdot, dt, damping, singular
-                    )
-                    break
-
-        scale = 1.0
-        if self._respect_velocity_limits:
-            worst = max([abs(rate) * inverse for rate, inverse in zip(qdot, self._inverse_velocity_limits)])
-            if worst > 1.0:
-                scale = 1.0 / worst
-                qdot = [rate * scale for rate in qdot]
-        return _output(qdot, error, manipulability, damping, scale, limited, singular)
+            return InvalidArgumentError("goal_pose rotation is not a rotation matrix; valid: orthonormal with det +1")
+        if not math.isfinite(sum(error) + sum(feed_forward)):
+            return NonFiniteError("the goal pose or the goal twist")
+        return NonFiniteError("the Jacobian (q or the model)")
 
     def _redistribute(
         self, q_values: list, values: Sequence[float], rhs: list, qdot: list, dt: float, damping: float, singular: bool
     ) -> tuple[list, tuple[int, ...], float, bool]:
-        """SNS-style position-limit handling (the rare path: some joint would cross a limit).
+        """SNS-style position-limit handling, called by the generated step when some joint would
+        cross a limit within ``dt``: ``(qdot, held joints, λ, singular)``.
 
         Repeatedly saturates the joint that violates its bound the most (relative to its
         velocity limit) at the rate that lands it on the limit, removes its column and
@@ -437,7 +336,7 @@ class CartesianController:
                 reduced[16 + r * n + worst_joint] = 0.0
             if len(held) == n:
                 break
-            solved, damping, singular, _ = self._solve_general(reduced, residual)
+            solved, damping, singular, _ = self._solver.solve(reduced, residual, self._epsilon_sq, self._damping_max_sq)
             for j in range(n):
                 if j not in held:
                     qdot[j] = solved[j]

@@ -8,11 +8,14 @@ each of those cost more in call overhead and tuple packing than in arithmetic, s
 module generates one function doing all of it on local variables, with the model and the
 controller's constants (gains, limits, thresholds, constant Jacobian entries) folded in.
 
-The generated function handles the common case only and returns None whenever anything
-else is needed — a possible singularity (the cheap eigenvalue bound does not clear ε²), a
-joint that would cross a position limit, a non-finite value — and the controller then
-runs its general path (:meth:`CartesianController._step_general`), which is also the
-reference the tests compare this one with.
+The generated step is the only implementation of the control law. The common case runs
+inline; the rare ones are calls from it: near a singularity (the cheap eigenvalue bound does
+not clear ε²) to the one damped least-squares solve
+(:class:`manip_kin.damped_least_squares.DampedSolver`), at a position limit to the
+controller's SNS redistribution. Pieces defined elsewhere enter as their own code: the
+rotation vector is inlined from :mod:`manip_kin.rotations` (:mod:`manip_kin.source_inline`),
+the solve from :mod:`manip_kin.unrolled_linalg`'s generator. Input it cannot use (a
+non-finite value, ``dt <= 0``) makes it return None; the controller then says what is wrong.
 
 :func:`ik_iteration_source` does the same for one iteration of the damped least-squares IK
 (:mod:`manip_kin.ik`).
@@ -26,6 +29,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from manip_kin.rotations import rotvec_from_quaternion, shepperd_quaternion
+from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
     _determinant_and_trace,
     _inverse_trace_lines,
@@ -43,33 +48,9 @@ _GENERATED_MATH = {"sqrt": math.sqrt, "atan2": math.atan2, "cos": math.cos, "sin
 # with digits). The chain's own locals (q0.., c0.., s0.., v0.. today) must not be among
 # them: checked on generation.
 _STEP_NAMES = re.compile(
-    r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|w\d+_\d+|p\d+|r\d+|x\d+|y\d+|inverse_trace|weight|shift|step|g|q|f|dt)$"
+    r"^([A-Z]\w*|a\d+_\d+|b\d+|d|l\d+_\d+|w\d+_\d+|p\d+|r\d+|x\d+|y\d+|inverse_trace|weight|shift|step|g|q|f|dt|_)$"
 )
 _ASSIGNMENT = re.compile(r"^\s*([A-Za-z_][\w\s,]*?)\s*=(?!=)")
-
-_ROTVEC = """\
-    TRC = M00 + M11 + M22
-    if TRC >= M00 and TRC >= M11 and TRC >= M22:
-        SS = 2.0 * sqrt(1.0 + TRC if TRC > -1.0 else 0.0)
-        QX = (M21 - M12) / SS; QY = (M02 - M20) / SS; QZ = (M10 - M01) / SS; QW = 0.25 * SS
-    elif M00 >= M11 and M00 >= M22:
-        SS = 2.0 * sqrt(max(1.0 + M00 - M11 - M22, 0.0))
-        QX = 0.25 * SS; QY = (M01 + M10) / SS; QZ = (M02 + M20) / SS; QW = (M21 - M12) / SS
-    elif M11 >= M22:
-        SS = 2.0 * sqrt(max(1.0 + M11 - M00 - M22, 0.0))
-        QX = (M01 + M10) / SS; QY = 0.25 * SS; QZ = (M12 + M21) / SS; QW = (M02 - M20) / SS
-    else:
-        SS = 2.0 * sqrt(max(1.0 + M22 - M00 - M11, 0.0))
-        QX = (M02 + M20) / SS; QY = (M12 + M21) / SS; QZ = 0.25 * SS; QW = (M10 - M01) / SS
-    if QW < 0.0:
-        QX = -QX; QY = -QY; QZ = -QZ; QW = -QW
-    VN = sqrt(QX * QX + QY * QY + QZ * QZ)
-    if VN < 1e-8 * QW:
-        SC = 2.0 / QW
-    else:
-        SC = 2.0 * atan2(VN, QW) / VN
-    E0 = QX * SC; E1 = QY * SC; E2 = QZ * SC
-"""
 
 
 def _split_chain_source(source: str) -> tuple[list[str], list[str]]:
@@ -125,7 +106,10 @@ def _chain_and_error_lines(header: str, chain: Callable, dof: int) -> tuple[list
     for i in range(3):
         for j in range(3):
             lines.append(f"    M{i}{j} = " + _sum([_product(goal[i][k], current[j][k]) for k in range(3)]))
-    lines += _ROTVEC.rstrip("\n").split("\n")
+    # The rotation vector of M: rotations.rotvec_from_entries, inlined from its own source.
+    entries = [f"M{i}{j}" for i in range(3) for j in range(3)]
+    lines += inline_lines(shepperd_quaternion, entries, ["QX", "QY", "QZ", "QW"], "SQ_")
+    lines += inline_lines(rotvec_from_quaternion, ["QX", "QY", "QZ", "QW"], ["E0", "E1", "E2"], "RV_")
     for axis, (goal_name, index) in enumerate((("GX", 3), ("GY", 7), ("GZ", 11))):
         lines.append(f"    E{3 + axis} = " + _sum([goal_name, _product(-1.0, pose[index])]))
     return lines, tokens, constants
@@ -142,13 +126,21 @@ def step_source(
     upper: Sequence[float] | None,
     inverse_velocity_limits: Sequence[float] | None,
 ) -> str:
-    """Source of ``step(q, g, f, dt)`` for one chain and controller configuration.
+    """Source of ``step(q, g, f, dt)``: the control law of :mod:`manip_kin.control`, every case.
 
     The generated function takes ``q`` (n floats), the goal pose rows ``g`` (at least 3
     rows of 4 floats), the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and
     returns a :class:`manip_kin.control.ControlOutput` (the class is given as ``OUTPUT``
-    when compiling) or None (see the module docstring). ``lower``/``upper`` None skip the
-    position-limit check, ``inverse_velocity_limits`` None the velocity scaling.
+    when compiling), or None for input it cannot use (a non-finite value, ``dt <= 0``; it
+    may also raise on a wrong ``q`` length). ``lower``/``upper`` None skip the position
+    limits, ``inverse_velocity_limits`` None the velocity scaling.
+
+    The common case runs inline: the undamped solve, certified by the eigenvalue bounds of
+    ``J Jᵀ`` (σ_min² >= ``epsilon_sq``). When the certificate fails the step calls
+    ``SOLVE(values, b)`` (:meth:`manip_kin.damped_least_squares.DampedSolver.solve`: exact
+    σ_min and the damping rule); when a joint would cross a position limit it calls
+    ``REDISTRIBUTE(q, values, b, qdot, dt, damping, singular)`` (the SNS step of
+    :class:`manip_kin.control.CartesianController`). Both are given when compiling.
     """
     n, m = dof, len(rows)
     lines, tokens, constants = _chain_and_error_lines("def step(q, g, f, dt):", chain, dof)
@@ -163,25 +155,37 @@ def step_source(
     lines.append(f"    W = {check}")
     lines.append("    if W - W != 0.0:")
     lines.append("        return None")
+    # The chain's output as a tuple, for the rare branches that hand it over.
+    values = "(" + ", ".join(repr(constants[k]) if k in constants else tokens[k] for k in range(len(tokens))) + ",)"
+    rhs = "[" + ", ".join(f"b{i}" for i in range(m)) + "]"
+    qdot_names = ", ".join(f"QD{j}" for j in range(n)) + ","
     entries = jacobian_entries(n, rows, tokens, constants)
     body, qdot = damped_solve_lines(entries, m, n, shifted=False)
-    lines += body
-    lines.append(f"    DET, TR = {_determinant_and_trace(m, shifted=False)}")
+    # One pass of a loop: `continue` (a pivot that is not positive, a failed certificate) falls
+    # to the `else` branch, the damped solve; `break` skips it.
+    lines.append("    for _ in ONCE:")
+    lines += ["    " + line.replace("return None", "continue") for line in body]
+    lines.append(f"        DET, TR = {_determinant_and_trace(m, shifted=False)}")
     # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) when the eigenvalues
-    # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops).
+    # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops); see
+    # unrolled_linalg.smallest_eigenvalue_bound.
     if m > 1:
-        lines.append(f"    if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
-        lines += ["    " + line for line in _inverse_trace_lines(m)]
-        lines.append(f"        if inverse_trace * {epsilon_sq!r} > 1.0:")
-        lines.append("            return None")
+        lines.append(f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
+        lines += ["        " + line for line in _inverse_trace_lines(m)]
+        lines.append(f"            if inverse_trace * {epsilon_sq!r} > 1.0:")
+        lines.append("                continue")
     else:
-        lines.append(f"    if DET < {epsilon_sq!r}:")
-        lines.append("        return None")
+        lines.append(f"        if DET < {epsilon_sq!r}:")
+        lines.append("            continue")
     for j in range(n):
-        lines.append(f"    QD{j} = {qdot[j]}")
+        lines.append(f"        QD{j} = {qdot[j]}")
+    lines.append("        LAMBDA = 0.0; SINGULAR = False; MANIPULABILITY = sqrt(DET)")
+    lines.append("        break")
+    lines.append("    else:")
+    lines.append(f"        QDOT, LAMBDA, SINGULAR, MANIPULABILITY = SOLVE({values}, {rhs})")
+    lines.append(f"        {qdot_names} = QDOT")
+    lines.append("    LIMITED = ()")
     if lower is not None and upper is not None:
-        # A joint that would end outside its limits after dt needs the general path (which
-        # also lets a joint already outside move back in).
         inside = [
             f"{float(lower[j])!r} <= Q{j} + QD{j} * dt <= {float(upper[j])!r}"
             for j in range(n)
@@ -189,7 +193,11 @@ def step_source(
         ]
         if inside:
             lines.append(f"    if not ({' and '.join(inside)}):")
-            lines.append("        return None")
+            lines.append(
+                f"        QDOT, LIMITED, LAMBDA, SINGULAR = REDISTRIBUTE(q, {values}, {rhs}, "
+                f"[{', '.join(f'QD{j}' for j in range(n))}], dt, LAMBDA, SINGULAR)"
+            )
+            lines.append(f"        {qdot_names} = QDOT")
     lines.append("    S = 1.0")
     # A joint without a velocity limit (inverse 0: the URDF gave none) takes no part.
     limited = [] if inverse_velocity_limits is None else [j for j in range(n) if inverse_velocity_limits[j] > 0.0]
@@ -200,55 +208,64 @@ def step_source(
         worst = ", ".join(f"abs(QD{j})*{float(inverse_velocity_limits[j])!r}" for j in limited)
         lines.append(f"    if {exceeds}:")
         lines.append(f"        S = 1.0 / max({worst}{', 0.0' if len(limited) == 1 else ''})")
-        lines.append(f"        {', '.join(f'QD{j}' for j in range(n))}, = {', '.join(f'QD{j} * S' for j in range(n))},")
+        lines.append(f"        {qdot_names} = {', '.join(f'QD{j} * S' for j in range(n))},")
     # The ControlOutput is filled through __dict__ (it is a frozen dataclass; its __init__
     # would set each field through object.__setattr__, several times slower).
     lines.append("    OUT = NEW(OUTPUT)")
     lines.append(
         f"    OUT.__dict__.update(qdot=array(({', '.join(f'QD{j}' for j in range(n))},)), "
         "orientation_error=array((E0, E1, E2)), position_error=array((E3, E4, E5)), "
-        "manipulability=sqrt(DET), damping=0.0, velocity_scale=S, limited_joints=(), singular=False)"
+        "manipulability=MANIPULABILITY, damping=LAMBDA, velocity_scale=S, limited_joints=LIMITED, "
+        "singular=SINGULAR)"
     )
     lines.append("    return OUT")
     return "\n".join(lines) + "\n"
 
 
-_CACHE: dict[tuple, tuple[Callable, Callable]] = {}
+_CACHE: dict[tuple, tuple[Callable, object]] = {}
 
 
-def compile_step(chain: Callable, dof: int, rows: Sequence[int], output_class: type, **constants) -> Callable | None:
-    """Compile :func:`step_source` (cached); None when the chain cannot be fused (no ``source``).
+def compile_step(
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    output_class: type,
+    solve: Callable,
+    redistribute: Callable,
+    **constants,
+) -> Callable:
+    """Compile :func:`step_source` (the code object is cached per chain and constants).
 
     Args:
         chain: the generated chain with its ``source``.
         dof: number of joints n.
         rows: task rows.
         output_class: :class:`manip_kin.control.ControlOutput`.
+        solve: ``SOLVE`` of :func:`step_source`.
+        redistribute: ``REDISTRIBUTE`` of :func:`step_source`.
         **constants: the remaining arguments of :func:`step_source`.
     """
-    key = (id(chain), dof, tuple(rows), output_class) + tuple(
+    key = (id(chain), dof, tuple(rows)) + tuple(
         (name, tuple(value) if isinstance(value, (list, tuple)) else value) for name, value in sorted(constants.items())
     )
     cached = _CACHE.get(key)
-    if cached is not None and cached[0] is chain:
-        return cached[1]
-    if not isinstance(getattr(chain, "source", None), str):
-        return None
-    try:
+    if cached is None or cached[0] is not chain:
         source = step_source(chain, dof, rows, **constants)
-    except ValueError:
-        return None
+        cached = (chain, compile(source, "<manip_kin control step>", "exec"), source)
+        _CACHE[key] = cached
     namespace: dict = {
         **_GENERATED_MATH,
         "array": np.array,
         "NEW": object.__new__,
         "OUTPUT": output_class,
         "INFINITY": math.inf,
+        "ONCE": (None,),
+        "SOLVE": solve,
+        "REDISTRIBUTE": redistribute,
     }
-    exec(compile(source, "<manip_kin control step>", "exec"), namespace)  # noqa: S102 - our own source
+    exec(cached[1], namespace)  # noqa: S102 - our own source
     function = namespace["step"]
-    function.source = source
-    _CACHE[key] = (chain, function)
+    function.source = cached[2]
     return function
 
 

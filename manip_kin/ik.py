@@ -41,13 +41,13 @@ import numpy as np
 
 from manip_kin.closed_form import nearest_closed_form
 from manip_kin.control import _pose_error_values
+from manip_kin.damped_least_squares import DampedSolver
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.fast_step import compile_ik_iteration
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation
 from manip_kin.tasks import Task, parse_task
-from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
 
 IK_METHODS = ("lm", "nr", "dls")
 # Default damping per method: λ̄ [m² | rad²] added to w·|e|² for lm (kept tiny: near a
@@ -123,8 +123,10 @@ class _Problem:
         self.orientation_rows = task.orientation_rows
         self.position_rows = task.position_rows
         self.chain = compiled_kinematics(model, frame_index, True)
-        # Reads every Jacobian entry from the chain's output, so held columns can be zeroed.
-        self.solve = damped_solver(self.chain, n, task.rows, fold_constants=False)
+        # The one damped solve; reads every Jacobian entry from the chain's output, so held
+        # columns can be zeroed.
+        self.solver = DampedSolver(self.chain, n, task.rows)
+        self.solve = self.solver.shifted
         self.lower, self.upper = model.lower.tolist(), model.upper.tolist()
         # Revolute joints spanning a full turn are wrapped (q and q ± 2π are the same pose);
         # the others are clipped.
@@ -464,19 +466,10 @@ def _general_iteration(
 
 
 def _newton_step(problem: _Problem, values, error: list, threshold: float):
-    """``J⁺ e``, damped only when σ_min < ``threshold`` (then λ² = threshold² - σ_min²)."""
-    result = problem.solve(values, error, 0.0)
-    if result is not None and smallest_eigenvalue_bound(result[1], result[2], len(error)) >= threshold * threshold:
-        return result
-    jacobian = np.array(values[16:]).reshape(6, problem.n)[list(problem.rows)]
-    sigma_min_sq = max(float(np.linalg.eigvalsh(jacobian @ jacobian.T)[0]), 0.0)
-    damping_sq = max(0.0, threshold * threshold - sigma_min_sq)
-    if damping_sq == 0.0 and result is not None:
-        return result
-    damped = problem.solve(values, error, max(damping_sq, 1e-24))
-    if damped is None:  # rank-deficient beyond the damping floor (e.g. every column held)
-        return ([0.0] * problem.n, 0.0, 0.0)
-    return damped
+    """``J⁺ e``, damped only when σ_min < ``threshold``: Chiaverini's rule with λ_max = threshold,
+    i.e. ``λ² = threshold² - σ_min²``."""
+    threshold_sq = threshold * threshold
+    return problem.solver.solve(values, error, threshold_sq, threshold_sq)
 
 
 def _failure_reason(

@@ -2,7 +2,8 @@
 
 Integrates ``q ← q + q̇·dt`` step by step with :class:`manip_kin.control.CartesianController`
 (an ideal velocity-controlled arm: the commanded rates are the joint velocities), clamping
-``q`` into the position limits the way a real drive would, and records the controlled
+``q`` into the position limits the way a real drive would
+(:func:`manip_kin.joint_integration.integrate_joint_rates`, as the ``robot_state`` node), and records the controlled
 frame's pose, twist and errors. ``manip_kin simulate`` runs it.
 """
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.joint_integration import integrate_joint_rates
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation
@@ -198,7 +200,7 @@ def simulate(
     task = controller.task
     steps_max = int(math.ceil(duration / dt - 1e-9))
     recorder = _Recorder(model, controller.frame_index, steps_max // record_every + 2)
-    lower, upper = model.lower, model.upper
+    lower, upper = model.lower.tolist(), model.upper.tolist()
     inverse_velocity_limits = 1.0 / model.velocity_limits
     moving = goal_pose_fn is not None
     error_history = np.empty(steps_max + 1)  # task error norm per step, for the stall diagnosis
@@ -230,11 +232,11 @@ def simulate(
             recorder.add(time, q, output, output.qdot)
         qdot = output.qdot
         max_velocity_ratio = max(max_velocity_ratio, float(np.max(np.abs(qdot) * inverse_velocity_limits)))
-        q_next = q + qdot * dt
-        violation = float(max(np.max(lower - q_next), np.max(q_next - upper), 0.0))
+        # The drive stops at the limits whatever it is commanded (the controller already
+        # respects the velocity limits, or was told not to: no scaling here).
+        q_next, _, _, violation = integrate_joint_rates(q.tolist(), qdot.tolist(), dt, lower, upper)
         max_violation = max(max_violation, violation)
-        # The drive stops at the limits whatever it is commanded.
-        q = np.clip(q_next, lower, upper) if violation > 0.0 else q_next
+        q = np.array(q_next)
         step += 1
     final_orientation, final_position = task.error_norms(output.orientation_error, output.position_error)
     if moving and final_orientation < tolerance and final_position < tolerance:

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from manip_kin.damped_least_squares import damped_least_squares
 from manip_kin.errors import InvalidArgumentError, check_finite
 from manip_kin.kinematics import KinematicsData, forward_kinematics, geometric_jacobian_from_data
 from manip_kin.model import RobotModel
@@ -384,7 +385,7 @@ def _limited_dls_step(jac, error, q, lower, upper, damping) -> np.ndarray:
     step = np.zeros_like(q)
     for _ in range(3):
         j = jac[:, active]
-        step_active = j.T @ np.linalg.solve(j @ j.T + damping * damping * np.eye(6), error)
+        step_active = damped_least_squares(j, error, damping)
         step[:] = 0.0
         step[active] = step_active
         blocked = ((q <= lower + 1e-12) & (step < 0)) | ((q >= upper - 1e-12) & (step > 0))

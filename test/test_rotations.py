@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kin_reference import euler_rpy, expm, rodrigues, twist_matrix
 
+from manip_kin.damped_least_squares import damped_least_squares
 from manip_kin.errors import NotARotationError
-from manip_kin.linalg import damped_left_pinv, damped_right_pinv, damped_solve, left_pinv, right_pinv
 from manip_kin.rotations import (
     adjoint,
     check_rotation,
@@ -140,26 +140,23 @@ def test_check_rotation_names_what_is_wrong():
         quat_to_matrix([0, 0, 0, 0])
 
 
-def test_pseudo_inverses_left_right_plain_and_damped():
+def test_damped_least_squares_solves_the_normal_equations():
     rng = np.random.default_rng(1)
     wide = rng.normal(size=(3, 5))
-    tall = wide.T
-    np.testing.assert_allclose(wide @ right_pinv(wide), np.eye(3), atol=1e-12)
-    np.testing.assert_allclose(left_pinv(tall) @ tall, np.eye(3), atol=1e-12)
-    np.testing.assert_allclose(right_pinv(wide), np.linalg.pinv(wide), atol=1e-12)
     damping = 0.3
     expected = np.linalg.solve(wide.T @ wide + damping**2 * np.eye(5), wide.T)  # normal equations
-    np.testing.assert_allclose(damped_right_pinv(wide, damping), expected, atol=1e-12)
-    np.testing.assert_allclose(damped_left_pinv(wide, damping), expected, atol=1e-12)
     b = rng.normal(size=3)
-    np.testing.assert_allclose(damped_solve(wide, b, damping), expected @ b, atol=1e-12)
+    np.testing.assert_allclose(damped_least_squares(wide, b, damping), expected @ b, atol=1e-12)
+    # without damping: the minimum-norm solution of a full-row-rank system
+    np.testing.assert_allclose(damped_least_squares(wide, b, 0.0), np.linalg.pinv(wide) @ b, atol=1e-12)
     # A rank-deficient matrix: the damped inverse is V diag(σ / (σ² + λ²)) Uᵀ from the SVD, the
     # zero singular value contributing nothing (finite, not 1/0).
     singular = np.array([[1.0, 0.0], [1.0, 0.0]])
     u, sigma, vt = np.linalg.svd(singular)
     expected = vt.T @ np.diag(sigma / (sigma**2 + 0.1**2)) @ u.T
-    np.testing.assert_allclose(damped_right_pinv(singular, 0.1), expected, atol=1e-12)
     np.testing.assert_allclose(expected, [[1 / (2 + 0.01), 1 / (2 + 0.01)], [0.0, 0.0]], atol=1e-15)
+    rhs = np.array([1.0, 2.0])
+    np.testing.assert_allclose(damped_least_squares(singular, rhs, 0.1), expected @ rhs, atol=1e-12)
 
 
 @given(unit_vectors)

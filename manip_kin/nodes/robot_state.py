@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
 from manip_kin.errors import InvalidArgumentError, JointCountError
+from manip_kin.joint_integration import integrate_joint_rates
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
@@ -143,18 +144,9 @@ class JointIntegrator:
             self.qdot_values = [0.0] * n
             self.velocity_scale = 1.0
         else:
-            rates = command.tolist()
-            inverse = self._inverse_velocity_limits
-            # Scale the whole vector (not joint by joint) so the Cartesian direction holds.
-            peak = max(abs(rates[i]) * inverse[i] for i in range(n))
-            scale = 1.0 / peak if peak > 1.0 else 1.0
-            self.velocity_scale = scale
-            step = scale * dt
-            q, lower, upper = self.q_values, self._lower, self._upper
-            q_next = [min(max(q[i] + rates[i] * step, lower[i]), upper[i]) for i in range(n)]
-            inverse_dt = 1.0 / dt
-            self.qdot_values = [(q_next[i] - q[i]) * inverse_dt for i in range(n)]
-            self.q_values = q_next
+            self.q_values, self.qdot_values, self.velocity_scale, _ = integrate_joint_rates(
+                self.q_values, command.tolist(), dt, self._lower, self._upper, self._inverse_velocity_limits
+            )
         self._update_kinematics()
 
     def _update_kinematics(self) -> None:
