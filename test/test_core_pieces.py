@@ -1,0 +1,145 @@
+"""The core's single implementations: errors and exit codes, the joint integrator, the inliner."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from kin_reference import rodrigues
+
+from manip_kin.errors import (
+    InputError,
+    InvalidArgumentError,
+    ManipKinError,
+    OperationError,
+    UnknownRobotError,
+    exit_code_for,
+)
+from manip_kin.joint_integration import integrate_joint_rates
+from manip_kin.pipeline import PipelineError
+from manip_kin.recording.errors import RecordingError
+from manip_kin.rotations import rotvec_from_entries, rotvec_from_quaternion, shepperd_quaternion
+from manip_kin.source_inline import inline_lines
+
+# --- errors ---------------------------------------------------------------------------------
+
+
+def test_input_errors_and_failures_are_separate_families():
+    assert issubclass(InvalidArgumentError, InputError) and issubclass(InputError, ValueError)
+    assert issubclass(RecordingError, InputError)
+    assert issubclass(PipelineError, OperationError) and not issubclass(PipelineError, ValueError)
+    assert not issubclass(ManipKinError, ValueError)
+    assert exit_code_for(UnknownRobotError("nosuchbot", ["genova7"])) == 2
+    assert exit_code_for(PipelineError("robot_state exited")) == 1
+    assert exit_code_for(ManipKinError("nothing to plot")) == 1
+
+
+def test_node_runner_exit_codes(monkeypatch):
+    """run_node: 2 for a configuration error, 1 for a failure that is not one."""
+    from manip_kin.nodes.runner import run_node
+
+    def configuration_error():
+        raise InvalidArgumentError("rate_hz = -5; valid: > 0")
+
+    def failure():
+        raise PipelineError("the recording directory vanished")
+
+    assert run_node(configuration_error, "usage", argv=["node"]) == 2
+    assert run_node(failure, "usage", argv=["node"]) == 1
+
+
+def test_cli_maps_failures_to_exit_1(monkeypatch, capsys):
+    import manip_kin.cli.model_commands as model_commands
+    from manip_kin.cli import main
+
+    def fail(args):
+        raise PipelineError("no /joint_states within 1 s")
+
+    original = model_commands.register
+
+    def register(subparsers):
+        original(subparsers)
+        subparsers.choices["robots"].set_defaults(run=fail)
+
+    monkeypatch.setattr(model_commands, "register", register)
+    assert main(["robots"]) == 1
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "no /joint_states" in error[0]
+
+
+# --- the joint integrator -------------------------------------------------------------------
+
+joint_values = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+@settings(derandomize=True, max_examples=200)
+@given(st.lists(st.tuples(joint_values, joint_values), min_size=1, max_size=7), st.floats(1e-4, 0.5))
+def test_integrator_stays_in_limits_and_keeps_the_direction(joints, dt):
+    q = [min(max(position, -1.0), 1.5) for position, _ in joints]
+    rates = [rate for _, rate in joints]
+    lower, upper = [-1.0] * len(q), [1.5] * len(q)
+    inverse_limits = [1.0 / 2.0] * len(q)
+    q_next, applied, scale, overshoot = integrate_joint_rates(q, rates, dt, lower, upper, inverse_limits)
+    unclamped = np.array(q) + scale * np.array(rates) * dt
+    np.testing.assert_allclose(q_next, np.clip(unclamped, lower, upper), atol=1e-15)
+    assert overshoot == pytest.approx(max(0.0, float(np.max(np.maximum(-1.0 - unclamped, unclamped - 1.5)))))
+    # scaled as a whole into the velocity limits: the direction of the command holds
+    peak = max(abs(r) / 2.0 for r in rates)
+    assert scale == pytest.approx(min(1.0, 1.0 / peak) if peak > 0 else 1.0)
+    assert max(abs(r) for r in applied) <= 2.0 * (1 + 1e-12)
+    np.testing.assert_allclose(np.array(applied) * dt, np.array(q_next) - np.array(q), atol=1e-12)
+
+
+def test_integrator_without_velocity_limits_does_not_scale():
+    q_next, applied, scale, overshoot = integrate_joint_rates([0.0, 0.9], [10.0, 10.0], 0.01, [-1, -1], [1, 1])
+    assert scale == 1.0 and q_next == [0.1, 1.0] and overshoot == pytest.approx(0.0)
+    assert applied == pytest.approx([10.0, 10.0])
+    _, _, _, overshoot = integrate_joint_rates([0.0, 0.95], [10.0, 10.0], 0.01, [-1, -1], [1, 1])
+    assert overshoot == pytest.approx(0.05)
+
+
+# --- the inliner ----------------------------------------------------------------------------
+
+
+def _run_inlined(entries: list[float]) -> tuple[float, float, float]:
+    names = [f"M{i}{j}" for i in range(3) for j in range(3)]
+    lines = [f"    {name} = {value!r}" for name, value in zip(names, entries)]
+    lines += inline_lines(shepperd_quaternion, names, ["QX", "QY", "QZ", "QW"], "SQ_")
+    lines += inline_lines(rotvec_from_quaternion, ["QX", "QY", "QZ", "QW"], ["E0", "E1", "E2"], "RV_")
+    source = "def f():\n" + "\n".join(lines) + "\n    return E0, E1, E2\n"
+    namespace = {"sqrt": math.sqrt, "atan2": math.atan2}
+    exec(source, namespace)  # noqa: S102 - test source
+    return namespace["f"]()
+
+
+@settings(derandomize=True, max_examples=200)
+@given(
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda v: np.linalg.norm(v) > 0.1),
+    st.sampled_from([0.0, 1e-9, 1e-3, 1.0, 2.5, math.pi - 1e-7, math.pi]) | st.floats(0.0, math.pi),
+)
+def test_inlined_rotation_vector_is_axis_times_angle(axis, angle):
+    """The inlined code computes rotvec_from_entries exactly, and that is axis·angle (Rodrigues)."""
+    axis = np.array(axis) / np.linalg.norm(axis)
+    rotation = rodrigues(axis, angle)
+    inlined = _run_inlined(rotation.ravel().tolist())
+    assert inlined == rotvec_from_entries(*rotation.ravel().tolist())
+    if angle < math.pi - 1e-6:  # at π the axis sign is ambiguous
+        np.testing.assert_allclose(inlined, axis * angle, atol=1e-9)
+    else:
+        assert np.linalg.norm(inlined) == pytest.approx(angle, abs=1e-6)
+        assert abs(float(np.dot(inlined, axis))) == pytest.approx(angle, abs=1e-6)
+
+
+def test_inliner_refuses_what_it_cannot_inline():
+    def early_return(x):
+        if x > 0:
+            return x
+        return -x
+
+    with pytest.raises(ValueError, match="Return"):
+        inline_lines(early_return, ["a"], ["b"], "P_")
+    with pytest.raises(ValueError, match="takes 1 arguments"):
+        inline_lines(early_return, ["a", "b"], ["c"], "P_")
