@@ -46,6 +46,8 @@ def benchmark_control_step(model: RobotModel, n: int = 20000, seed: int = 0, dt:
 
     Returns:
         ``median_us``, ``p90_us``, ``mean_us``, ``min_us`` (per step, timer overhead removed),
+        ``regular_median_us``/``singular_median_us`` and their ratio ``singular_to_regular``
+        (steps with σ_min < ε against the others), ``singular_fraction``,
         ``general_path_fraction`` (steps that needed damping, limits or velocity scaling) and
         ``n``.
     """
@@ -66,19 +68,28 @@ def benchmark_control_step(model: RobotModel, n: int = 20000, seed: int = 0, dt:
     clock = time.perf_counter_ns
     step = controller.step
     timings = np.empty(n)
+    singular = np.zeros(n, dtype=bool)
     general = 0
     for i in range(n):
         q, goal = cases[i % len(cases)]
         start = clock()
         output = step(q, goal, None, dt)
         timings[i] = clock() - start
+        singular[i] = output.singular
         general += output.damping > 0.0 or bool(output.limited_joints) or output.velocity_scale < 1.0
     timings = (timings - overhead) / 1e3
+    regular_median = float(np.median(timings[~singular]))
+    singular_median = float(np.median(timings[singular])) if singular.any() else float("nan")
     return {
         "median_us": float(np.median(timings)),
         "p90_us": float(np.percentile(timings, 90)),
         "mean_us": float(np.mean(timings)),
         "min_us": float(np.min(timings)),
+        # Steps near a singularity (σ_min < ε, damped) against the others, timed in the same run.
+        "regular_median_us": regular_median,
+        "singular_median_us": singular_median,
+        "singular_to_regular": singular_median / regular_median,
+        "singular_fraction": float(singular.mean()),
         "general_path_fraction": general / n,
         "n": n,
     }

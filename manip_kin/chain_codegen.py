@@ -38,6 +38,7 @@ class _Emitter:
     def __init__(self):
         self.lines: list[str] = []
         self.count = 0
+        self.known: dict[str, str] = {}  # expression -> the variable already holding it
 
     def combine(self, terms: Sequence[tuple], constant: float = 0.0) -> object:
         """The value ``constant + Σ sign·a·b`` over ``terms`` of ``(a, b)`` or ``(a, b, sign)``.
@@ -72,8 +73,11 @@ class _Emitter:
             return parts[0]  # a plain or negated alias: no statement needed
         expression = " + ".join(parts).replace("+ -", "- ")
         if constant != 0.0:
-            expression += f" + {constant!r}"
+            expression += f" - {-constant!r}" if constant < 0.0 else f" + {constant!r}"
+        if expression in self.known:  # the same value computed before (e.g. a shared lever arm)
+            return self.known[expression]
         name = f"v{self.count}"
+        self.known[expression] = name
         self.count += 1
         self.lines.append(f"{name} = {expression}")
         return name

@@ -233,6 +233,7 @@ class CartesianController:
             gain_angular=float(config.gain_angular),
             gain_linear=float(config.gain_linear),
             epsilon_sq=self._epsilon_sq,
+            damping_max_sq=self._damping_max_sq,
             lower=self._lower if config.respect_position_limits else None,
             upper=self._upper if config.respect_position_limits else None,
             inverse_velocity_limits=self._inverse_velocity_limits if config.respect_velocity_limits else None,

@@ -34,10 +34,10 @@ def damping_sq(sigma_min_sq: float, threshold_sq: float, damping_max_sq: float) 
         sigma_min_sq: ``σ_min²``, the smallest eigenvalue of ``J Jᵀ`` (>= 0).
         threshold_sq: ``ε²`` (> 0).
         damping_max_sq: ``λ_max²``, the damping at an exact singularity (>= 0).
+
+    One expression, so that the generated control step inlines this very function.
     """
-    if sigma_min_sq >= threshold_sq:
-        return 0.0
-    return damping_max_sq * (1.0 - sigma_min_sq / threshold_sq)
+    return damping_max_sq * (1.0 - sigma_min_sq / threshold_sq) if sigma_min_sq < threshold_sq else 0.0
 
 
 def damped_least_squares(matrix, rhs, damping: float) -> np.ndarray:
@@ -54,6 +54,43 @@ def damped_least_squares(matrix, rhs, damping: float) -> np.ndarray:
     gram = a @ a.T
     gram.flat[:: gram.shape[0] + 1] += damping * damping
     return a.T @ np.linalg.solve(gram, rhs)
+
+
+def _lapack_eigenvalues():
+    """numpy's LAPACK kernel behind ``eigvalsh`` (lower triangle), or None.
+
+    ``np.linalg.eigvalsh`` spends most of its ~5 µs on a 6x6 matrix in Python checks and an
+    error-state context around this one call; the control step near a singularity calls it
+    every cycle. It is numpy's private module, so it is only used where it exists and gives
+    the public function's answer (checked once here); otherwise the public path runs.
+    """
+    try:
+        from numpy.linalg import _umath_linalg
+
+        kernel = _umath_linalg.eigvalsh_lo
+        probe = np.array([[2.0, 1.0], [1.0, 2.0]])
+        if np.allclose(kernel(probe, signature="d->d"), np.linalg.eigvalsh(probe), rtol=0.0, atol=1e-12):
+            return kernel
+    except (ImportError, AttributeError, TypeError, ValueError):
+        pass
+    return None
+
+
+_EIGENVALUES_KERNEL = _lapack_eigenvalues()
+
+
+def symmetric_eigenvalues(entries, size: int) -> list[float]:
+    """Eigenvalues, ascending, of a small symmetric matrix given as ``size²`` floats, row-major.
+
+    Uses the lower triangle. The same values as ``np.linalg.eigvalsh``, faster where numpy's
+    kernel can be called directly (see :func:`_lapack_eigenvalues`); a non-finite result
+    (which the public function would report as an error) goes through the public path.
+    """
+    if _EIGENVALUES_KERNEL is not None:
+        values = _EIGENVALUES_KERNEL(np.array(entries).reshape(size, size), signature="d->d").tolist()
+        if values[0] - values[0] == 0.0 and values[-1] - values[-1] == 0.0:
+            return values
+    return np.linalg.eigvalsh(np.array(entries).reshape(size, size)).tolist()
 
 
 def gram_eigenvalues(jacobian: np.ndarray) -> np.ndarray:

@@ -29,9 +29,11 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from manip_kin.damped_least_squares import damping_sq, symmetric_eigenvalues
 from manip_kin.rotations import rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
+    _cholesky_body,
     _determinant_and_trace,
     _inverse_trace_lines,
     _product,
@@ -97,7 +99,14 @@ def _chain_and_error_lines(header: str, chain: Callable, dof: int) -> tuple[list
         if value is not None:
             constants.setdefault(index, value)
     pose = [constants[k] if k in constants else tokens[k] for k in range(12)]
-    lines = [header, f"    {', '.join(f'Q{j}' for j in range(dof))}, = q"]
+    # The chain's first line unpacks q into q0..q{n-1}: the step reads the joints from there.
+    unpack = chain_lines[0].strip().rstrip(",").replace(" ", "")
+    if (
+        unpack != ",".join(f"q{j}" for j in range(dof)) + "=q"
+        and unpack != ",".join(f"q{j}" for j in range(dof)) + ",=q"
+    ):
+        raise ValueError("unexpected chain source layout")
+    lines = [header]
     lines += chain_lines
     lines.append("    (G0, G1, G2, GX), (G3, G4, G5, GY), (G6, G7, G8, GZ) = g[0], g[1], g[2]")
     # E = R_goal · Rᵀ: entry (i, j) = goal row i · current row j.
@@ -122,6 +131,7 @@ def step_source(
     gain_angular: float,
     gain_linear: float,
     epsilon_sq: float,
+    damping_max_sq: float,
     lower: Sequence[float] | None,
     upper: Sequence[float] | None,
     inverse_velocity_limits: Sequence[float] | None,
@@ -169,17 +179,37 @@ def step_source(
     # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) when the eigenvalues
     # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops); see
     # unrolled_linalg.smallest_eigenvalue_bound.
-    if m > 1:
-        lines.append(f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
-        lines += ["        " + line for line in _inverse_trace_lines(m)]
-        lines.append(f"            if inverse_trace * {epsilon_sq!r} > 1.0:")
-        lines.append("                continue")
-    else:
-        lines.append(f"        if DET < {epsilon_sq!r}:")
-        lines.append("            continue")
+    lines.append("        MANIPULABILITY = sqrt(DET)")
+    certificate_failed = (
+        [f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:"]
+        + ["        " + line for line in _inverse_trace_lines(m)]
+        + [f"            if inverse_trace * {epsilon_sq!r} > 1.0:"]
+        if m > 1
+        else [f"        if DET < {epsilon_sq!r}:", "            if True:"]
+    )
+    lines += certificate_failed
+    # Possibly near a singularity: σ_min² from the eigenvalues of J Jᵀ (the a's above), the
+    # damping from the one rule (damped_least_squares.damping_sq, inlined), a shifted solve.
+    gram = ", ".join(f"a{max(i, k)}_{min(i, k)}" for i in range(m) for k in range(m))
+    deep = "                "
+    lines.append(f"{deep}EIG = EIGENVALUES(({gram},), {m})")
+    lines.append(f"{deep}SIGMA_SQ = EIG[0] if EIG[0] > 0.0 else 0.0")
+    lines.append(
+        f"{deep}MANIPULABILITY = sqrt(" + "*".join(f"(EIG[{i}] if EIG[{i}] > 0.0 else 0.0)" for i in range(m)) + ")"
+    )
+    lines += inline_lines(damping_sq, ["SIGMA_SQ", repr(epsilon_sq), repr(damping_max_sq)], ["d"], "DS_", deep)
+    lines.append(f"{deep}if d > 0.0:")
+    lines += [deep + line.replace("return None", "continue") for line in _cholesky_body(m, shifted=True)]
+    for j in range(n):
+        lines.append(f"{deep}    QD{j} = {qdot[j]}")
+    lines.append(f"{deep}    LAMBDA = sqrt(d); SINGULAR = True")
+    lines.append(f"{deep}    break")
+    # No damping configured (λ_max = 0) below ε: the least-squares fallback of the solver.
+    lines.append(f"{deep}if SIGMA_SQ < {epsilon_sq!r}:")
+    lines.append(f"{deep}    continue")
     for j in range(n):
         lines.append(f"        QD{j} = {qdot[j]}")
-    lines.append("        LAMBDA = 0.0; SINGULAR = False; MANIPULABILITY = sqrt(DET)")
+    lines.append("        LAMBDA = 0.0; SINGULAR = False")
     lines.append("        break")
     lines.append("    else:")
     lines.append(f"        QDOT, LAMBDA, SINGULAR, MANIPULABILITY = SOLVE({values}, {rhs})")
@@ -187,7 +217,7 @@ def step_source(
     lines.append("    LIMITED = ()")
     if lower is not None and upper is not None:
         inside = [
-            f"{float(lower[j])!r} <= Q{j} + QD{j} * dt <= {float(upper[j])!r}"
+            f"{float(lower[j])!r} <= q{j} + QD{j} * dt <= {float(upper[j])!r}"
             for j in range(n)
             if not (math.isinf(lower[j]) and math.isinf(upper[j]))
         ]
@@ -213,8 +243,9 @@ def step_source(
     # would set each field through object.__setattr__, several times slower).
     lines.append("    OUT = NEW(OUTPUT)")
     lines.append(
-        f"    OUT.__dict__.update(qdot=array(({', '.join(f'QD{j}' for j in range(n))},)), "
-        "orientation_error=array((E0, E1, E2)), position_error=array((E3, E4, E5)), "
+        # One array for the three vectors (separate regions of it): one allocation, not three.
+        f"    ALL = array(({', '.join(f'QD{j}' for j in range(n))}, E0, E1, E2, E3, E4, E5))\n"
+        f"    OUT.__dict__.update(qdot=ALL[:{n}], orientation_error=ALL[{n}:{n + 3}], position_error=ALL[{n + 3}:], "
         "manipulability=MANIPULABILITY, damping=LAMBDA, velocity_scale=S, limited_joints=LIMITED, "
         "singular=SINGULAR)"
     )
@@ -261,6 +292,7 @@ def compile_step(
         "INFINITY": math.inf,
         "ONCE": (None,),
         "SOLVE": solve,
+        "EIGENVALUES": symmetric_eigenvalues,
         "REDISTRIBUTE": redistribute,
     }
     exec(cached[1], namespace)  # noqa: S102 - our own source
@@ -329,15 +361,15 @@ def ik_iteration_source(
         column = " = ".join(held_columns[j])
         conditions = []
         if not math.isinf(lower[j]):
-            conditions.append(f"(Q{j} <= {float(lower[j])!r} and {gradient} < 0.0)")
+            conditions.append(f"(q{j} <= {float(lower[j])!r} and {gradient} < 0.0)")
         if not math.isinf(upper[j]):
-            conditions.append(f"(Q{j} >= {float(upper[j])!r} and {gradient} > 0.0)")
+            conditions.append(f"(q{j} >= {float(upper[j])!r} and {gradient} > 0.0)")
         lines.append(f"    if {' or '.join(conditions)}:")
         lines.append(f"        {column} = 0.0")
     body, qdot = damped_solve_lines(entries, m, n)
     lines += [line.replace("return None", "return 2, q, O, P") for line in body]
     for j in range(n):
-        lines.append(f"    N{j} = Q{j} + step * ({qdot[j]})")
+        lines.append(f"    N{j} = q{j} + step * ({qdot[j]})")
         low, high = float(lower[j]), float(upper[j])
         if math.isinf(low) and math.isinf(high):
             continue

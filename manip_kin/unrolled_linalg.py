@@ -92,10 +92,6 @@ def chain_constants(chain: Callable, dof: int, samples: int = 3, seed: int = 0) 
     }
 
 
-def _negate(token: str) -> str:
-    return token[1:] if token.startswith("-") else f"-{token}"
-
-
 _CONSTANTS_CACHE: dict[int, tuple[Callable, dict[int, float]]] = {}
 
 
@@ -108,27 +104,35 @@ def _constants_of(chain: Callable, dof: int) -> dict[int, float]:
 
 
 def _product(a: float | str, b: float | str) -> float | str:
-    """``a * b`` as a constant or an expression; names may carry a leading minus."""
+    """``a * b`` as a constant or an expression; names may carry a leading minus (folded)."""
     if isinstance(a, float) and isinstance(b, float):
         return a * b
     if isinstance(a, float) or isinstance(b, float):
         constant, name = (a, b) if isinstance(a, float) else (b, a)
         if constant == 0.0:
             return 0.0
+        if name.startswith("-"):
+            constant, name = -constant, name[1:]
         if constant == 1.0:
             return name
         if constant == -1.0:
-            return _negate(name)
+            return f"-{name}"
         return f"{constant!r}*{name}"
-    return f"{a}*{b}"
+    negative = a.startswith("-") != b.startswith("-")
+    product = f"{a.lstrip('-')}*{b.lstrip('-')}"
+    return f"-{product}" if negative else product
 
 
 def _sum(terms: Sequence[float | str]) -> str:
+    """``Σ terms`` as an expression: constants added up, negative terms subtracted."""
     constant = sum(t for t in terms if isinstance(t, float))
     parts = [t for t in terms if not isinstance(t, float)]
     if constant != 0.0 or not parts:
         parts.append(repr(constant))
-    return " + ".join(parts)
+    expression = parts[0]
+    for part in parts[1:]:
+        expression += f" - {part[1:]}" if part.startswith("-") else f" + {part}"
+    return expression
 
 
 def jacobian_entries(

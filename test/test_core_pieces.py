@@ -143,3 +143,29 @@ def test_inliner_refuses_what_it_cannot_inline():
         inline_lines(early_return, ["a"], ["b"], "P_")
     with pytest.raises(ValueError, match="takes 1 arguments"):
         inline_lines(early_return, ["a", "b"], ["c"], "P_")
+
+
+# --- the damped least-squares pieces --------------------------------------------------------
+
+
+def test_damping_rule_is_chiaverinis():
+    from manip_kin.damped_least_squares import damping_sq
+
+    assert damping_sq(0.0, 4e-4, 1.6e-3) == pytest.approx(1.6e-3)  # λ_max² at a singularity
+    assert damping_sq(1e-4, 4e-4, 1.6e-3) == pytest.approx(1.6e-3 * 0.75)
+    assert damping_sq(4e-4, 4e-4, 1.6e-3) == 0.0 and damping_sq(1.0, 4e-4, 1.6e-3) == 0.0
+
+
+@pytest.mark.parametrize("kernel", ["numpy's LAPACK kernel", "public eigvalsh"])
+def test_symmetric_eigenvalues_match_eigvalsh_on_both_paths(monkeypatch, kernel):
+    import manip_kin.damped_least_squares as dls
+
+    if kernel == "public eigvalsh":
+        monkeypatch.setattr(dls, "_EIGENVALUES_KERNEL", None)
+    rng = np.random.default_rng(21)
+    for size in (1, 3, 6):
+        for _ in range(50):
+            factor = rng.normal(size=(size, size + 1)) * rng.uniform(1e-4, 3.0, size=(size, 1))
+            matrix = factor @ factor.T
+            values = dls.symmetric_eigenvalues(tuple(matrix.ravel().tolist()), size)
+            np.testing.assert_allclose(values, np.linalg.eigvalsh(matrix), rtol=1e-12, atol=1e-15)
