@@ -13,7 +13,7 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: venv demo test lint format bench clean
+.PHONY: venv demo test lint format bench bench-anchors clean
 
 venv: $(STAMP)
 
@@ -42,5 +42,20 @@ format: $(STAMP)
 bench: $(STAMP)
 	$(VPY) bench/run.py --out bench/results/bench.json
 
+# manip_kin against pinocchio and robotics-toolbox-python, in a venv of its own (never a
+# dependency of the package): interleaved rounds, same configurations and targets.
+ANCHORS_VENV := .venv-anchors
+ANCHORS_STAMP := $(ANCHORS_VENV)/.installed
+
+$(ANCHORS_STAMP): bench/requirements-anchors.txt setup.py
+	test -x $(ANCHORS_VENV)/bin/python || $(PYTHON) -m venv $(ANCHORS_VENV)
+	$(ANCHORS_VENV)/bin/python -m pip install --quiet --upgrade pip "setuptools>=64,<80" wheel
+	$(ANCHORS_VENV)/bin/python -m pip install --quiet -r bench/requirements-anchors.txt
+	$(ANCHORS_VENV)/bin/python -m pip install --quiet --no-deps -e .
+	touch $(ANCHORS_STAMP)
+
+bench-anchors: $(ANCHORS_STAMP)
+	$(ANCHORS_VENV)/bin/python bench/anchors.py --out bench/results/anchors.json
+
 clean:
-	rm -rf $(VENV) build install log *.egg-info .pytest_cache
+	rm -rf $(VENV) $(ANCHORS_VENV) build install log *.egg-info .pytest_cache
