@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
 
 # --- the robots in each library ---------------------------------------------------------------
@@ -91,8 +92,10 @@ def _stripped_urdf(path: Path, directory: str) -> str:
 
 
 def setups(directory: str) -> list[Setup]:
+    from robot_data_files import example_robot_data_urdf
+
     from manip_kin.robots import load_robot
-    from manip_kin.urdf import example_robot_data_urdf, load_urdf, model_to_urdf
+    from manip_kin.urdf import load_urdf, model_to_urdf
 
     genova = load_robot("genova7")
     genova_path = Path(directory) / "genova7.urdf"
