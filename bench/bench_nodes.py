@@ -11,13 +11,16 @@
   (in this process, polled without an executor) of the first ``/joint_velocity_commands``
   whose tool z velocity has the new sign;
 * maximum distance of the tool from the straight segment during the irb120 line of
-  scenario (b) at 0.4 m/s, 1 kHz.
+  scenario (b) at 0.4 m/s, 1 kHz;
+* two full pipelines side by side on one domain (genova7 in ``/left``, irb120 in
+  ``/right``), both at 500 Hz and both tracking a goal: loop rate, p99 period error and
+  CPU of each of the six nodes.
 
 Each configuration also runs with the loop threads at SCHED_FIFO priority
 (``realtime_priority``) where the machine allows it: on a shared machine the default
 scheduler lets other jobs delay a 1 ms loop.
 
-Run alone: ``.venv/bin/python bench/bench_nodes.py``.
+Run alone: ``.venv/bin/python bench/bench_nodes.py`` (``... two``: the two-pipeline rows only).
 """
 
 from __future__ import annotations
@@ -188,6 +191,68 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         }
 
 
+def _two_pipeline_rows(rate_hz: float = 500.0, priority: int = 0, window: float = 6.0) -> list[dict]:
+    from manip_kin.kinematics import frame_pose
+    from manip_kin.pipeline import Pipeline, pipeline_processes
+    from manip_kin.robots import load_robot
+
+    arms = {
+        "/left": ("genova7", None, frame_pose(load_robot("genova7"), [1.8, -0.6, 0.2, -0.9, 0.2, 0.1, 1.0])),
+        "/right": (
+            "irb120",
+            [0.0, 0.3, 0.0, 0.0, 0.5, 0.0],
+            frame_pose(load_robot("irb120"), [0.6, 0.1, 0.3, 0.4, 0.9, 0.5]),
+        ),
+    }
+    label = f"two pipelines side by side, {rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
+    pipelines = {}
+    rows = []
+    try:
+        for namespace, (robot, start, _) in arms.items():
+            processes = pipeline_processes(robot, rate_hz=rate_hz, initial_positions=start, realtime_priority=priority)
+            pipeline = Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_two_"), namespace=namespace)
+            pipelines[namespace] = pipeline
+            pipeline.start()
+        for namespace, (_, _, goal) in arms.items():
+            pipelines[namespace].client().send_goal(goal)  # default gains 0.8/s: tracking for seconds
+        for pipeline in pipelines.values():
+            pipeline.client().spin_for(1.0)
+        start_cpu = {(ns, name): _cpu_seconds(p.pid(name)) for ns, p in pipelines.items() for name in p.processes}
+        start = time.monotonic()
+        while time.monotonic() - start < window:
+            for pipeline in pipelines.values():
+                pipeline.client().spin_for(0.05)
+        elapsed = time.monotonic() - start
+        for namespace, pipeline in pipelines.items():
+            client = pipeline.client()
+            for name in pipeline.processes:
+                cpu = 100.0 * (_cpu_seconds(pipeline.pid(name)) - start_cpu[(namespace, name)]) / elapsed
+                status = client.latest_status(name)
+                row = {"metric": f"{namespace[1:]}/{name} loop, {label}", "cpu_percent": cpu}
+                if status is not None:
+                    row.update(
+                        state=status.message,
+                        rate_hz=status.number("loop_rate_hz"),
+                        p99_period_error_ms=status.number("loop_period_error_p99_ms"),
+                        max_period_error_ms=status.number("loop_period_error_max_ms"),
+                    )
+                row["target"] = "500 Hz held by all six, p99 period error ≤ 0.5 ms"
+                row["reference"] = "one pipeline alone: the rows above"
+                rows.append(row)
+    finally:
+        for pipeline in pipelines.values():
+            pipeline.stop()
+    return rows
+
+
+def run_two_pipeline_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
+    """Two pipelines at 500 Hz side by side, per scheduling priority."""
+    from manip_kin.pipeline import ensure_ros_isolation
+
+    ensure_ros_isolation()
+    return [row for priority in priorities for row in _two_pipeline_rows(500.0, priority)]
+
+
 def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
     """Every figure above, as rows ``{"metric", values..., "target", "reference"}``."""
     from manip_kin.pipeline import ensure_ros_isolation
@@ -198,10 +263,12 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
         for rate_hz in (500.0, 1000.0):
             rows += _loop_rows(rate_hz, priority)
         rows.append(_line_row(1000.0, priority))
+        rows += _two_pipeline_rows(500.0, priority)
     return rows
 
 
 if __name__ == "__main__":
-    results = run_node_benchmarks()
+    # ``bench_nodes.py two``: only the two-pipeline figures.
+    results = run_two_pipeline_benchmarks() if sys.argv[1:] == ["two"] else run_node_benchmarks()
     json.dump(results, sys.stdout, indent=1)
     sys.stdout.write("\n")

@@ -44,7 +44,13 @@ def two_arms(tmp_path_factory):
     logs = tmp_path_factory.mktemp("two_arm_logs")
     out = tmp_path_factory.mktemp("two_arm_recording") / "two_arms.mcap"
     topics = [f"{namespace}/{name}" for namespace in ARMS for name in RECORDED]
-    recorder = Pipeline([NodeProcess("recorder", "recorder", {"output": str(out), "topics": topics})], log_dir=logs)
+    # One recorder names both arms' topics; a second one, in /left, records its namespace by default.
+    left_out = out.with_name("left_default.mcap")
+    recorders = [
+        NodeProcess("recorder", "recorder", {"output": str(out), "topics": topics}),
+        NodeProcess("recorder", "left_recorder", {"output": str(left_out)}, namespace="/left"),
+    ]
+    recorder = Pipeline(recorders, log_dir=logs)
     pipelines = {}
     try:
         recorder.start()
@@ -92,6 +98,10 @@ def test_each_arm_reaches_its_own_goal_without_moving_the_other(two_arms):
         assert status.values["goal_stamp"] == stamp
 
     assert recorder.stop_process("recorder", timeout=10.0) == 0
+    assert recorder.stop_process("left_recorder", timeout=10.0) == 0
+    left_only = {topic.name for topic in read_info(out.with_name("left_default.mcap")).topics}
+    assert {"/left/joint_states", "/left/goal_pose", "/left/robot_description", "/diagnostics"} <= left_only
+    assert not any(name.startswith("/right") for name in left_only)
     info = read_info(out)
     names = {topic.name for topic in info.topics}
     for namespace in ARMS:
