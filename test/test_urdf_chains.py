@@ -185,3 +185,19 @@ def test_cli_warns_once_about_joints_without_velocity_limit(capsys):
     assert code == 0
     warnings = [line for line in err.splitlines() if "no velocity limit" in line]
     assert len(warnings) == 1 and "right_yaw, right_pitch" in warnings[0]
+
+
+@pytest.mark.parametrize("robot", bundled_robot_names())
+def test_exported_description_reads_back_with_its_own_chain_without_link_names(robot):
+    # What cartesian_controller does with robot_state's robot_description: no link parameters.
+    model = load_robot(robot)
+    again = load_urdf_string(model_to_urdf(model))
+    assert again.joint_names == model.joint_names and again.has_tool == model.has_tool
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q = model.random_configuration(rng)
+        for frame in ("ee", "tool") if model.has_tool else ("ee",):
+            np.testing.assert_allclose(frame_pose(again, q, frame), frame_pose(model, q, frame), atol=1e-12)
+    # Link names given explicitly win over the export's own chain.
+    if model.has_tool:
+        assert not load_urdf_string(model_to_urdf(model), tip_link="ee").has_tool

@@ -78,6 +78,9 @@ def _build_model(
     tool_link: str | None,
     name: str | None,
 ) -> RobotModel:
+    if not (base_link or tip_link or tool_link) and "tip_link" in reader.chain_hint:
+        # A manip_kin export names its own chain (ee and tool, see model_to_urdf).
+        tip_link, tool_link = reader.chain_hint["tip_link"], reader.chain_hint.get("tool_link")
     base = reader.check_link(base_link, "base_link") if base_link else reader.root_link()
     tip = reader.check_link(tip_link, "tip_link") if tip_link else reader.default_tip(base)
     joints: list[Joint] = []

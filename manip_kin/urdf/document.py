@@ -17,6 +17,10 @@ import numpy as np
 from manip_kin.errors import ModelFileError
 from manip_kin.rotations import transform_from_xyz_rpy
 
+#: Element written by :func:`manip_kin.urdf.model_to_urdf` naming its chain (``tip_link``,
+#: ``tool_link``); the default chain when a reader is given no link names.
+CHAIN_HINT_ELEMENT = "manip_kin_chain"
+
 # URDF joint types that move along the chain.
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
@@ -54,6 +58,8 @@ class UrdfTree:
         self.parent_joint: dict[str, UrdfJoint] = {}
         self.child_joints: dict[str, list[UrdfJoint]] = {name: [] for name in self.links}
         self._link_joints()
+        hint = self.root.find(CHAIN_HINT_ELEMENT)
+        self.chain_hint = {} if hint is None else {k: v for k, v in hint.attrib.items() if v in self.links}
 
     def fail(self, field: str, problem: str) -> ModelFileError:
         return ModelFileError(self.source, field, problem)

@@ -10,6 +10,7 @@ import numpy as np
 
 from manip_kin.model import Joint, RobotModel
 from manip_kin.rotations import rotation_z_onto
+from manip_kin.urdf.document import CHAIN_HINT_ELEMENT
 
 # The model has no effort limits, but URDF requires the attribute on <limit>.
 EXPORT_EFFORT = 100.0  # [N·m] or [N]
@@ -138,6 +139,10 @@ def model_to_urdf(model: RobotModel) -> str:
     frames of DH joints come back as the moving joint frame (``<link>_joint_frame``),
     since URDF places a link on its joint axis.
 
+    A ``<manip_kin_chain tip_link="ee" tool_link="tool"/>`` element names the chain, so that
+    :func:`~manip_kin.urdf.load_urdf_string` without link names reads back the same ``ee``
+    and ``tool`` (other URDF readers ignore it).
+
     Returns:
         The URDF text, with an XML declaration.
     """
@@ -181,5 +186,9 @@ def model_to_urdf(model: RobotModel) -> str:
     if tool_name is not None:
         tool_link = fixed_child(ee_name, tool_name, "tool_joint", np.asarray(model.tool, dtype=float))
         _add_visual(tool_link, np.eye(4), "sphere", "manip_kin_joint", radius=_FRAME_RADIUS)
+    # Which chain this is, for a reader that gets no link names (a controller reading
+    # robot_description): URDF parsers ignore elements they do not know.
+    hint = {"tip_link": ee_name, **({"tool_link": tool_name} if tool_name is not None else {})}
+    ET.SubElement(robot, CHAIN_HINT_ELEMENT, **hint)
     ET.indent(robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
