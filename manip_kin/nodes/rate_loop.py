@@ -1,4 +1,4 @@
-"""The fixed-rate loop every manip_kin node runs, and subscriptions that loop polls.
+"""The fixed-rate loop every manip_kin node runs (the node base class is in ``looping_node``).
 
 Why not an rclpy timer: measured here, an *empty* rclpy timer callback at 1 kHz costs
 about 42 % of a core (the Python executor rebuilds its wait set on every wake-up), and
@@ -6,14 +6,21 @@ each subscription callback costs another wake-up; a node with one timer and two
 subscriptions used ~80 % of a core at 1 kHz. A plain thread sleeping to absolute
 deadlines costs ~4 % at 1 kHz with the same period jitter, so each node runs its
 cycle in one :class:`RateLoop` thread, and the topics the cycle consumes are
-:class:`PolledSubscription` s that the loop drains at the start of each cycle instead
-of executor callbacks. The executor in the main thread (``run_node``) still serves
-everything else: parameter services, other subscriptions, shutdown.
+:class:`~manip_kin.nodes.polling.PolledSubscription` s that the loop drains at the start
+of each cycle instead of executor callbacks. The executor in the main thread
+(``run_node``) still serves everything else: parameter services, shutdown.
 
 Design notes:
     * deadlines are absolute (``start + k · period``) so the average rate is exact; a
       cycle that starts more than half a period late re-anchors the schedule instead of
       running the missed cycles back to back (like an rclpy timer, it skips them);
+    * a waiter (:class:`~manip_kin.nodes.polling.LoopWaiter`) can end the sleep early when
+      a message that needs an immediate reaction arrives (a new goal): the cycle runs at
+      once and the schedule re-anchors on it;
+    * no exception ends the loop: a failing cycle is counted and handed to ``on_error``
+      (guarded too), and the next cycle runs. Only a loop that cannot do its job for
+      seconds on end (rate far below target, or every cycle failing) calls ``on_fatal``
+      and ends, so that the process exits non-zero and a supervisor restarts it;
     * timing statistics (periods, compute times) go into preallocated ring buffers and
       are summarised on demand (:meth:`RateLoop.stats`) for ``/diagnostics``.
 """
@@ -27,55 +34,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from rclpy.callback_groups import CallbackGroup
-from rclpy.node import Node
-from rclpy.qos import QoSProfile
 
+from manip_kin.nodes.polling import PolledSubscription, sleep_ns
+from manip_kin.nodes.throttled_log import ThrottledLog, safe_log
 
-class _NeverExecutedGroup(CallbackGroup):
-    """A callback group the executor never waits on: its entities are polled by hand."""
-
-    def can_execute(self, entity) -> bool:  # noqa: D102 - rclpy API
-        return False
-
-    def beginning_execution(self, entity) -> bool:  # noqa: D102 - rclpy API
-        return False
-
-    def ending_execution(self, entity) -> None:  # noqa: D102 - rclpy API
-        return None
-
-
-class PolledSubscription:
-    """A subscription read with :meth:`take` from the loop thread, not by the executor.
-
-    Args:
-        node: the node that owns it.
-        msg_type: message class.
-        topic: topic name (remappable like any other).
-        qos: QoS profile or depth.
-    """
-
-    def __init__(self, node: Node, msg_type, topic: str, qos: QoSProfile | int = 10):
-        self._subscription = node.create_subscription(
-            msg_type, topic, _ignore, qos, callback_group=_NeverExecutedGroup()
-        )
-        self._msg_type = msg_type
-
-    @property
-    def subscription(self):
-        """The underlying rclpy subscription (topic name, publisher count)."""
-        return self._subscription
-
-    def take(self, raw: bool = False):
-        """The oldest unread message (its CDR ``bytes`` with ``raw``), or None. Never blocks."""
-        handle = self._subscription.handle
-        with handle:
-            taken = handle.take_message(self._msg_type, raw)
-        return None if taken is None else taken[0]
-
-
-def _ignore(_msg) -> None:
-    return None
+__all__ = [
+    "LoopStats",
+    "PolledSubscription",
+    "RateLoop",
+    "ThrottledLog",
+    "stats_key_values",
+]
 
 
 @dataclass(frozen=True)
@@ -93,6 +62,8 @@ class LoopStats:
         overruns: cycles whose schedule had to be re-anchored (started > half a period late).
         errors: cycles whose function raised.
         samples: number of periods in the window.
+        woken: cycles run early because a message woke the loop (their periods are not in
+            the window statistics: they are reactions, not schedule).
     """
 
     target_rate_hz: float
@@ -105,6 +76,7 @@ class LoopStats:
     overruns: int
     errors: int
     samples: int
+    woken: int = 0
 
 
 class RateLoop:
@@ -119,6 +91,13 @@ class RateLoop:
         realtime_priority: SCHED_FIFO priority (1..99) of the loop thread, or 0 for normal
             scheduling. Needs CAP_SYS_NICE (root); without it the loop runs normally and
             :attr:`realtime_error` says why.
+        wait: ``wait(timeout_ns) -> bool`` blocks until the next deadline and returns True
+            when it returned early because the cycle should run now (default: sleep).
+        on_fatal: called with the reason when the loop gives up (see ``give_up_after``).
+        give_up_after: [s] the loop ends and calls ``on_fatal`` when, for this long without
+            a break, every cycle raised or the achieved rate stayed below
+            ``min_rate_fraction`` of ``rate_hz`` (0 = never give up).
+        min_rate_fraction: see ``give_up_after``.
     """
 
     def __init__(
@@ -129,19 +108,31 @@ class RateLoop:
         name: str = "rate_loop",
         window: int = 4096,
         realtime_priority: int = 0,
+        wait: Callable[[int], bool] | None = None,
+        on_fatal: Callable[[str], None] | None = None,
+        give_up_after: float = 10.0,
+        min_rate_fraction: float = 0.5,
     ):
-        if not rate_hz > 0:
-            raise ValueError(f"rate_hz = {rate_hz}; valid: > 0")
+        if not 0 < rate_hz < 1e6:
+            raise ValueError(f"rate_hz = {rate_hz}; valid: > 0 and < 1e6")
         self.rate_hz = float(rate_hz)
         self.period_ns = int(round(1e9 / rate_hz))
         self._cycle = cycle
         self._on_error = on_error
+        self._on_fatal = on_fatal
+        self._wait = wait or sleep_ns
         self._name = name
         self._periods_ns = np.zeros(window, dtype=np.int64)
         self._compute_ns = np.zeros(window, dtype=np.int64)
         self._count = 0
         self._overruns = 0
         self._errors = 0
+        self._woken = 0
+        self._give_up_ns = int(give_up_after * 1e9)
+        self._min_rate_fraction = float(min_rate_fraction)
+        self.last_error = ""
+        self.last_error_ns = 0
+        self.fatal_reason = ""
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.realtime_priority = int(realtime_priority)
@@ -176,40 +167,98 @@ class RateLoop:
     def _run(self) -> None:
         self._set_priority()
         period = self.period_ns
+        half = period // 2
         window = self._periods_ns.shape[0]
         stop = self._stop
-        sleep = time.sleep
+        wait = self._wait
         clock = time.monotonic_ns
         deadline = clock() + period
         last_start = 0
+        # Health over one-second windows: the loop gives up after give_up_after seconds of
+        # windows that ran too few cycles or in which every cycle failed.
+        health_start = clock()
+        health_cycles = health_failures = 0
+        unhealthy_since = 0
         while not stop.is_set():
-            remaining = deadline - clock()
-            if remaining > 0:
-                sleep(remaining * 1e-9)
-            start = clock()
-            if start - deadline > period // 2:
-                deadline = start  # late by more than half a period: skip, do not catch up
-                self._overruns += 1
-            deadline += period
+            try:
+                woken = wait(deadline - clock())
+                start = clock()
+                if woken and last_start and start - last_start < half:
+                    # Woken right after a cycle: keep at least half a period between cycles.
+                    sleep_ns(last_start + half - start)
+                    start = clock()
+                if woken:
+                    self._woken += 1
+                    deadline = start  # re-anchor the schedule on the reacting cycle
+                elif start - deadline > half:
+                    deadline = start  # late by more than half a period: skip, do not catch up
+                    self._overruns += 1
+                deadline += period
+            except Exception as error:  # noqa: BLE001 - a failing waiter must not end the loop
+                self._report(error)
+                start = clock()
+                deadline = start + period
+                woken = True  # no period sample for this cycle
+            failed = False
             try:
                 self._cycle(start)
             except Exception as error:  # noqa: BLE001 - a node must keep running
-                self._errors += 1
-                if self._on_error is not None:
-                    self._on_error(error)
+                failed = True
+                self._report(error)
             end = clock()
-            if last_start:
+            if last_start and not woken:
                 slot = self._count % window
                 self._periods_ns[slot] = start - last_start
                 self._compute_ns[slot] = end - start
                 self._count += 1
             last_start = start
+            health_cycles += 1
+            health_failures += failed
+            if end - health_start >= 1_000_000_000:
+                expected = (end - health_start) / period
+                healthy = health_failures < health_cycles and health_cycles >= self._min_rate_fraction * expected
+                if healthy:
+                    unhealthy_since = 0
+                elif not unhealthy_since:
+                    unhealthy_since = health_start
+                if self._give_up_ns and unhealthy_since and end - unhealthy_since >= self._give_up_ns:
+                    self._give_up(health_cycles, health_failures, (end - health_start) * 1e-9)
+                    return
+                health_start = end
+                health_cycles = health_failures = 0
+
+    def _report(self, error: BaseException) -> None:
+        self._errors += 1
+        try:
+            self.last_error = f"{type(error).__name__}: {error}"
+            self.last_error_ns = time.monotonic_ns()
+            if self._on_error is not None:
+                self._on_error(error)
+        except Exception as handler_error:  # noqa: BLE001 - the error path must not end the loop
+            safe_log(print, f"{self._name}: error handler failed: {type(handler_error).__name__}: {handler_error}")
+
+    def _give_up(self, cycles: int, failures: int, seconds: float) -> None:
+        give_up_s = self._give_up_ns * 1e-9
+        if failures >= cycles:
+            reason = f"every cycle failed for {give_up_s:g} s (last: {self.last_error})"
+        else:
+            reason = (
+                f"rate below {100 * self._min_rate_fraction:.0f} % of {self.rate_hz:g} Hz for {give_up_s:g} s "
+                f"(last second: {cycles / seconds:.0f} Hz)"
+            )
+        self.fatal_reason = reason
+        self._stop.set()
+        if self._on_fatal is not None:
+            try:
+                self._on_fatal(reason)
+            except Exception as error:  # noqa: BLE001 - nothing left to do but say so
+                safe_log(print, f"{self._name}: giving up ({reason}); fatal handler failed: {error}")
 
     def stats(self) -> LoopStats:
         """Summary of the last ``window`` cycles."""
         count = min(self._count, self._periods_ns.shape[0])
         if count == 0:
-            return LoopStats(self.rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self._overruns, self._errors, 0)
+            return LoopStats(self.rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self._overruns, self._errors, 0, self._woken)
         periods = self._periods_ns[:count].astype(float)
         compute = self._compute_ns[:count].astype(float)
         error = np.abs(periods - self.period_ns)
@@ -226,43 +275,8 @@ class RateLoop:
             overruns=self._overruns,
             errors=self._errors,
             samples=count,
+            woken=self._woken,
         )
-
-
-class LoopingNode(Node):
-    """A node whose periodic work runs in one :class:`RateLoop` thread.
-
-    Subclasses set ``self._warn`` (a :class:`ThrottledLog`) and call :meth:`start_loop` at
-    the end of their constructor; ``main()`` calls :meth:`stop` before the node is destroyed.
-    """
-
-    loop: RateLoop
-
-    def start_loop(self, rate_hz: float, cycle: Callable[[int], None], realtime_priority: int = 0) -> None:
-        """Start ``cycle(now_ns)`` at ``rate_hz`` [Hz] in the loop thread."""
-        self.loop = RateLoop(
-            rate_hz, cycle, self._on_loop_error, name=self.get_name(), realtime_priority=realtime_priority
-        )
-        if self.loop.realtime_priority:
-            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
-        self.loop.start()
-
-    def _on_loop_error(self, error: BaseException) -> None:
-        if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly
-            self.loop.stop(timeout=0.0)
-            return
-        self._warn("loop", f"cycle failed: {type(error).__name__}: {error}")
-
-    @property
-    def status_name(self) -> str:
-        """Name of this node's ``/diagnostics`` status: its namespace and name without the leading
-        slash (``cartesian_controller``, ``left/cartesian_controller``), so that two pipelines in
-        two namespaces report apart on the one global ``/diagnostics``."""
-        return self.get_fully_qualified_name().lstrip("/")
-
-    def stop(self) -> None:
-        """Stop the loop thread (before the node is destroyed)."""
-        self.loop.stop()
 
 
 def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
@@ -277,33 +291,14 @@ def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
         ("loop_cycles", str(stats.cycles)),
         ("loop_overruns", str(stats.overruns)),
         ("loop_errors", str(stats.errors)),
+        ("loop_woken", str(stats.woken)),
     ]
 
 
-class ThrottledLog:
-    """Rate-limits repeated log lines per kind of problem, counting what it held back.
+def __getattr__(name: str):
+    # The node base class lives in looping_node (it imports this module); nodes import it from here.
+    if name in ("LoopingNode", "LoopGaveUpError"):
+        from manip_kin.nodes import looping_node
 
-    rclpy's ``throttle_duration_sec`` throttles per call site, which would hide a
-    second kind of problem raised from the same place; this keys on ``kind``.
-
-    Args:
-        log: the function to call with the line, e.g. ``node.get_logger().warning``.
-        interval: seconds between two lines of the same kind.
-    """
-
-    def __init__(self, log: Callable[[str], None], interval: float = 1.0):
-        self._log = log
-        self._interval_ns = int(interval * 1e9)
-        self._last_ns: dict[str, int] = {}
-        self._held: dict[str, int] = {}
-
-    def __call__(self, kind: str, line: str) -> None:
-        """Log ``line`` unless a line of ``kind`` was logged less than ``interval`` ago."""
-        now = time.monotonic_ns()
-        last = self._last_ns.get(kind)
-        if last is not None and now - last < self._interval_ns:
-            self._held[kind] = self._held.get(kind, 0) + 1
-            return
-        held = self._held.pop(kind, 0)
-        self._last_ns[kind] = now
-        self._log(line + (f" ({held} more like this since the last report)" if held else ""))
+        return getattr(looping_node, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

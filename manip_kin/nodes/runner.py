@@ -51,9 +51,12 @@ def run_node(
         :class:`~manip_kin.errors.InputError` is), 1 when it could not start for
         another reason (a :class:`~manip_kin.errors.ManipKinError` such as an
         :class:`~manip_kin.errors.OperationError`); the reason is printed on one line.
+        Also 1 when the node's loop gave up (see ``LoopingNode``), so that a supervisor restarts it.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    from manip_kin.nodes.looping_node import LoopGaveUpError
 
     argv = list(sys.argv if argv is None else argv)
     if wants_help(argv, usage):
@@ -80,12 +83,18 @@ def run_node(
             return exit_code_for(error)
         except (KeyboardInterrupt, ExternalShutdownException):  # stopped while waiting (robot_description)
             return 0
+        except Exception as error:  # noqa: BLE001 - anything else: say why, exit non-zero
+            print(f"error: the node could not start: {type(error).__name__}: {error}", file=sys.stderr)
+            return 1
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         try:
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except LoopGaveUpError as error:
+            print(f"error: {node.get_name()} gave up: {error}", file=sys.stderr)
+            exit_code = 1
         except Exception:
             # A signal's context shutdown can land while spin() builds its wait set, which then
             # raises RCLError ("context is not valid") instead of ExternalShutdownException.

@@ -1,0 +1,194 @@
+"""Subscriptions a node's loop thread polls, and the one module that uses rclpy internals.
+
+The loops read their inputs at the start of each cycle instead of through executor
+callbacks (see :mod:`manip_kin.nodes.rate_loop` for the measured reason). Two ways to
+do that:
+
+* **fast** (rclpy internals): a subscription in a callback group the executor never
+  runs, drained with ``subscription.handle.take_message``; the loop thread waits on an
+  rcl wait set holding the subscriptions that should wake it (a new goal), so a goal is
+  acted on at once instead of at the next tick. ``handle`` and ``_rclpy.WaitSet`` are
+  not public API: they are used only here, only on the rclpy versions listed in
+  :data:`CHECKED_RCLPY`, and only while they have the attributes used.
+* **public**: ``create_subscription(..., raw=True)`` with a callback run by the node's
+  executor (``run_node``'s spin thread) that stores the newest messages in a bounded
+  queue and wakes the loop through a ``threading.Event``. Same behaviour, more CPU (the
+  Python executor wakes for every message).
+
+The fast path is chosen when available; ``MANIP_KIN_PUBLIC_RCLPY=1`` forces the public
+one (a test runs the nodes that way).
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import threading
+import time
+
+from rclpy.callback_groups import CallbackGroup
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+
+#: rclpy releases whose ``Subscription.handle.take_message`` and ``_rclpy.WaitSet`` were checked.
+CHECKED_RCLPY = ("7.1.",)
+
+
+def _rclpy_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("rclpy")
+    except Exception:  # noqa: BLE001 - unknown version: treated as unchecked
+        return ""
+
+
+def fast_path_problem() -> str:
+    """Why the fast path is not used ("" when it is)."""
+    if os.environ.get("MANIP_KIN_PUBLIC_RCLPY", "") not in ("", "0"):
+        return "MANIP_KIN_PUBLIC_RCLPY is set"
+    version = _rclpy_version()
+    if not version.startswith(CHECKED_RCLPY):
+        return f"rclpy {version or '(unknown version)'} is not one of the checked releases {CHECKED_RCLPY}"
+    try:
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+        wait_set = _rclpy.WaitSet
+        missing = [
+            name
+            for name in ("clear_entities", "add_subscription", "wait", "get_ready_entities")
+            if not hasattr(wait_set, name)
+        ]
+        if missing:
+            return f"rclpy's WaitSet lacks {missing}"
+    except (ImportError, AttributeError) as error:
+        return f"rclpy internals not found: {error}"
+    return ""
+
+
+class _NeverExecutedGroup(CallbackGroup):
+    """A callback group the executor never waits on: its entities are polled by hand."""
+
+    def can_execute(self, entity) -> bool:  # noqa: D102 - rclpy API
+        return False
+
+    def beginning_execution(self, entity) -> bool:  # noqa: D102 - rclpy API
+        return False
+
+    def ending_execution(self, entity) -> None:  # noqa: D102 - rclpy API
+        return None
+
+
+def _ignore(_msg) -> None:
+    return None
+
+
+class PolledSubscription:
+    """A subscription read with :meth:`take` from the loop thread.
+
+    Args:
+        node: the node that owns it.
+        msg_type: message class.
+        topic: topic name (remappable like any other).
+        qos: QoS profile or depth.
+        public: force the public-API path (default: the fast path when available).
+    """
+
+    def __init__(self, node: Node, msg_type, topic: str, qos: QoSProfile | int = 10, public: bool | None = None):
+        self._msg_type = msg_type
+        self.fast = not public and not fast_path_problem()
+        self.wake_event: threading.Event | None = None  # set on arrival (public path), see LoopWaiter
+        if self.fast:
+            self._subscription = node.create_subscription(
+                msg_type, topic, _ignore, qos, callback_group=_NeverExecutedGroup()
+            )
+            self._queue = None
+        else:
+            depth = qos.depth if isinstance(qos, QoSProfile) else int(qos)
+            self._queue: collections.deque | None = collections.deque(maxlen=max(1, depth))
+            self._subscription = node.create_subscription(msg_type, topic, self._store, qos, raw=True)
+
+    @property
+    def subscription(self):
+        """The underlying rclpy subscription (topic name, publisher count)."""
+        return self._subscription
+
+    def _store(self, data: bytes) -> None:
+        self._queue.append(data)
+        event = self.wake_event
+        if event is not None:
+            event.set()
+
+    def take(self, raw: bool = False):
+        """The oldest unread message (its CDR ``bytes`` with ``raw``), or None. Never blocks."""
+        if self._queue is not None:
+            try:
+                data = self._queue.popleft()
+            except IndexError:
+                return None
+            return data if raw else deserialize_message(data, self._msg_type)
+        handle = self._subscription.handle
+        with handle:
+            taken = handle.take_message(self._msg_type, raw)
+        return None if taken is None else taken[0]
+
+
+class LoopWaiter:
+    """Sleeps the loop thread until a deadline, waking early when a message arrives.
+
+    Args:
+        node: the node (its context owns the wait set).
+        subscriptions: the :class:`PolledSubscription` s whose messages should wake the loop.
+
+    :meth:`wait` returns True when it returned early because one of them has data.
+    """
+
+    def __init__(self, node: Node, subscriptions: list[PolledSubscription]):
+        self._subscriptions = list(subscriptions)
+        self._event = threading.Event()
+        self._wait_set = None
+        fast = [s for s in self._subscriptions if s.fast]
+        for subscription in self._subscriptions:
+            if not subscription.fast:
+                subscription.wake_event = self._event
+        if fast:
+            from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+            self._wait_set = _rclpy.WaitSet(len(fast), 0, 0, 0, 0, 0, node.context.handle)
+            self._handles = [s.subscription.handle for s in fast]
+
+    def wake(self) -> None:
+        """Wake the loop now (thread-safe)."""
+        self._event.set()
+
+    def wait(self, timeout_ns: int) -> bool:
+        """Block up to ``timeout_ns``; True when woken early by a message or :meth:`wake`."""
+        if timeout_ns <= 0:
+            return False
+        event = self._event
+        if event.is_set():
+            event.clear()
+            return True
+        if self._wait_set is None:
+            woken = event.wait(timeout_ns * 1e-9)
+            event.clear()
+            return woken
+        wait_set = self._wait_set
+        wait_set.clear_entities()
+        for handle in self._handles:
+            wait_set.add_subscription(handle)
+        wait_set.wait(timeout_ns)
+        if wait_set.get_ready_entities("subscription"):
+            return True
+        if event.is_set():
+            event.clear()
+            return True
+        return False
+
+
+def sleep_ns(timeout_ns: int) -> bool:
+    """Plain sleep (the loop without a waiter); never woken early."""
+    if timeout_ns > 0:
+        time.sleep(timeout_ns * 1e-9)
+    return False
