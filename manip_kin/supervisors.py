@@ -366,6 +366,13 @@ class GeneratorSupervisor:
         self.progress = 1.0
         self.state, self.detail = GeneratorState.HOLDING, f"{self.motion_kind} finished, final goal sent"
 
+    def stop(self, detail: str) -> bool:
+        """Stop streaming after a fault (the last goal sent is held); True when a motion was running."""
+        if self.state is not GeneratorState.STREAMING:
+            return False
+        self.state, self.detail = GeneratorState.HOLDING, detail
+        return True
+
     def report_due(self, now_ns: int) -> bool:
         """True when a status should be published now (regular period, or a state change)."""
         return self.throttle.due(now_ns, self.state)

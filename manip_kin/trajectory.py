@@ -147,11 +147,19 @@ def make_time_scaling(kind: str, length: float, angle: float, limits: MotionLimi
     """
     if kind not in TIME_SCALINGS:
         raise InvalidArgumentError(f"unknown time scaling {kind!r}; valid: {', '.join(TIME_SCALINGS)}")
+    if not (0.0 <= length < math.inf and 0.0 <= angle < math.inf):
+        raise InvalidArgumentError(f"line of {length} m, {angle} rad; valid: finite, non-negative length and angle")
     # Largest allowed ṡ and s̈: each Cartesian limit divided by the distance it applies to.
     rate_limit = min(_ratio(limits.max_linear_velocity, length), _ratio(limits.max_angular_velocity, angle))
     accel_limit = min(_ratio(limits.max_linear_acceleration, length), _ratio(limits.max_angular_acceleration, angle))
     if math.isinf(rate_limit):
         return TimeScaling(kind, 0.0)
+    # A line so long (or limits so small) that the ratios underflow would divide by zero below.
+    if not (rate_limit > 1e-150 and accel_limit > 1e-150):
+        raise InvalidArgumentError(
+            f"line of {length:.6g} m, {angle:.6g} rad cannot be timed within the limits; "
+            "valid: a line whose duration is a finite number of seconds"
+        )
     if kind == "constant":
         return TimeScaling(kind, 1.0 / rate_limit)
     if kind in _PEAK_RATE:
@@ -207,8 +215,8 @@ class LineTrajectory:
     @classmethod
     def plan(cls, start, goal, kind: str = "trapezoidal", limits: MotionLimits = MotionLimits()) -> LineTrajectory:
         """A line from ``start`` to ``goal`` timed by the fastest ``kind`` scaling within ``limits``."""
-        start = np.asarray(start, dtype=float)
-        goal = np.asarray(goal, dtype=float)
+        start = check_finite(start, "start pose")
+        goal = check_finite(goal, "goal pose")
         length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
         angle = float(np.linalg.norm(matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])))
         return cls(start, goal, make_time_scaling(kind, length, angle, limits))

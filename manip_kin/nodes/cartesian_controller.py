@@ -17,6 +17,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from manip_kin.bounds import InputBounds
 from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.errors import ManipKinError
 from manip_kin.nodes import conversions as conv
@@ -186,7 +187,10 @@ class CartesianControllerNode(LoopingNode):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
         self._zeros = np.zeros(self.model.dof)
-        self._joint_states = conv.JointStateDecoder(self.model.joint_names)
+        self.bounds = InputBounds.of(self.model)
+        self._joint_states = conv.JointStateDecoder(
+            self.model.joint_names, self.bounds.position_lower, self.bounds.position_upper
+        )
 
         self.q: np.ndarray | None = None
         self.goal: np.ndarray | None = None
@@ -203,7 +207,8 @@ class CartesianControllerNode(LoopingNode):
             f"at {self.rate_hz:g} Hz, gains {config.gain_angular:g}/{config.gain_linear:g} 1/s, "
             f"goals in frame {self.base_frame!r}, task {self.controller.task.name}"
         )
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+        # A new goal runs a cycle at once instead of waiting for the next tick.
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], wake_on=(self._goal_sub,))
 
     @property
     def state(self) -> ControllerState:
@@ -284,7 +289,9 @@ class CartesianControllerNode(LoopingNode):
                     f"rejected {self._joint_state_sub.subscription.topic_name}: {error}",
                 )
         while (msg := self._goal_sub.take()) is not None:
-            problem = conv.pose_problem(msg, self.base_frame, "goal pose", self._quaternion_tolerance)
+            problem = conv.pose_problem(
+                msg, self.base_frame, "goal pose", self._quaternion_tolerance, self.bounds.max_target_distance
+            )
             if problem is not None:
                 self.rejected_goals += 1
                 self._warn(
@@ -296,7 +303,9 @@ class CartesianControllerNode(LoopingNode):
             self.goal_stamp = conv.stamp_key(msg.header.stamp)
             self.supervisor.goal_received(now_ns, GoalKind.POSE)
         while (msg := self._twist_sub.take()) is not None:
-            problem = conv.twist_problem(msg, self.base_frame, "goal twist")
+            problem = conv.twist_problem(
+                msg, self.base_frame, "goal twist", self.bounds.max_twist_linear, self.bounds.max_twist_angular
+            )
             if problem is not None:
                 self.rejected_twists += 1
                 self._warn(
@@ -309,6 +318,10 @@ class CartesianControllerNode(LoopingNode):
             self.supervisor.twist_received(now_ns, bool(angular.any() or linear.any()))
 
     # --- the cycle -------------------------------------------------------------------------------
+
+    def publish_safe_output(self) -> None:
+        """After a failed cycle: zero joint rates."""
+        self._command_pub.publish(self._command_cdr.encode(self._zeros))
 
     def _cycle(self, now_ns: int) -> None:
         self._take_inputs(now_ns)
@@ -348,10 +361,10 @@ class CartesianControllerNode(LoopingNode):
             ("rejected_goals", str(self.rejected_goals)),
             ("rejected_twists", str(self.rejected_twists)),
             ("rejected_joint_states", str(self.rejected_joint_states)),
+            ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
-        status = conv.make_diagnostic_status(
-            self.status_name, self.supervisor.level, self.state, self.model.name, values
-        )
+        level = self.diagnostic_level(self.supervisor.level)
+        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
 

@@ -18,6 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
+from manip_kin.bounds import InputBounds
 from manip_kin.errors import InvalidArgumentError, JointCountError
 from manip_kin.joint_integration import integrate_joint_rates
 from manip_kin.kinematics import compiled_kinematics
@@ -236,6 +237,7 @@ class RobotStateNode(LoopingNode):
         self._set_parameters(params)
         LiveParameters(self, PARAMETERS, self._set_parameters)
 
+        self._max_command = InputBounds.of(self.model).max_command
         self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", 10)
         self._joint_state_pub = self.create_publisher(JointState, "joint_states", 10)
         self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", 10)
@@ -288,7 +290,7 @@ class RobotStateNode(LoopingNode):
         dof = self.model.dof
         while (data := self._command_sub.take(raw=True)) is not None:
             values = conv.decode_float64_array(data)
-            problem = conv.command_problem(values, dof)
+            problem = conv.command_problem(values, dof, max_abs=self._max_command)
             if problem is not None:
                 self.rejected_commands += 1
                 self._warn(
@@ -298,6 +300,15 @@ class RobotStateNode(LoopingNode):
                 continue
             self._command = values
             self._command_time_ns = now_ns
+
+    def publish_safe_output(self) -> None:
+        """After a failed cycle: hold position (drop the command; the state again, at zero velocity)."""
+        self._command = None
+        integrator = self.integrator
+        stamp_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        self._joint_state_pub.publish(
+            self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, [0.0] * self.model.dof)
+        )
 
     def _cycle(self, now_ns: int) -> None:
         self._take_commands(now_ns)
@@ -339,8 +350,9 @@ class RobotStateNode(LoopingNode):
             ("rejected_commands", str(self.rejected_commands)),
             ("joints_at_limit", ",".join(limited)),
             ("velocity_scale", f"{integrator.velocity_scale:.4f}"),
+            ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
-        level = "warn" if limited or self.rejected_commands else "ok"
+        level = self.diagnostic_level("warn" if limited or self.rejected_commands else "ok")
         status = conv.make_diagnostic_status(self.status_name, level, command_state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(stamp, [status]))
 

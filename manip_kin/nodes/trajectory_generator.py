@@ -22,7 +22,8 @@ from nav_msgs.msg import Path
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from manip_kin.errors import ManipKinError
+from manip_kin.bounds import UNBOUNDED, InputBounds
+from manip_kin.errors import InvalidArgumentError, ManipKinError
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
@@ -153,6 +154,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.rate_hz = params["rate_hz"]
         self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
         self._params = params
+        self.bounds = InputBounds.of(self.model)
         self._configure(params)
         LiveParameters(self, PARAMETERS, self._set_parameters)
 
@@ -170,7 +172,10 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._goal_cdr = conv.PoseStampedCdr(self.base_frame)
         self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
-        self._mapper = conv.JointStateMapper(self.model.joint_names)
+        self._mapper = conv.JointStateMapper(
+            self.model.joint_names, self.bounds.position_lower, self.bounds.position_upper
+        )
+        self._last_goal_pose: np.ndarray | None = None
 
         self._tool_pose_msg: PoseStamped | None = None
         self._joint_state_msg: JointState | None = None
@@ -181,7 +186,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"robot {self.model.name}: {self.time_scaling} lines at <= {self.limits.max_linear_velocity:g} m/s, "
             f"{self.limits.max_angular_velocity:g} rad/s, streamed at {self.rate_hz:g} Hz"
         )
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], wake_on=(self._target_sub,))
 
     @property
     def state(self) -> GeneratorState:
@@ -206,12 +211,14 @@ class TrajectoryGeneratorNode(LoopingNode):
         Raises:
             ManipKinError: limits the planner cannot use.
         """
-        self.limits = MotionLimits(
+        limits = MotionLimits(
             max_linear_velocity=params["max_linear_velocity"],
             max_linear_acceleration=params["max_linear_acceleration"],
             max_angular_velocity=params["max_angular_velocity"],
             max_angular_acceleration=params["max_angular_acceleration"],
         )
+        _check_limits(limits, self.bounds)
+        self.limits = limits
         self.time_scaling = params["time_scaling"]
         self.check_reach = params["check_reach"]
         self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
@@ -235,7 +242,9 @@ class TrajectoryGeneratorNode(LoopingNode):
         """Drain the targets; return the newest valid one (None when there is none)."""
         target = None
         while (msg := self._target_sub.take()) is not None:
-            problem = conv.pose_problem(msg, self.base_frame, "line target", self._quaternion_tolerance)
+            problem = conv.pose_problem(
+                msg, self.base_frame, "line target", self._quaternion_tolerance, self.bounds.max_target_distance
+            )
             if problem is not None:
                 self._reject(msg, problem)
                 continue
@@ -266,7 +275,13 @@ class TrajectoryGeneratorNode(LoopingNode):
                 target_msg, f"no current {self._tool_pose_sub.subscription.topic_name} (is robot_state running?)"
             )
             return False
-        tool_problem = conv.pose_problem(self._tool_pose_msg, self.base_frame, "tool pose", self._quaternion_tolerance)
+        tool_problem = conv.pose_problem(
+            self._tool_pose_msg,
+            self.base_frame,
+            "tool pose",
+            self._quaternion_tolerance,
+            self.bounds.max_target_distance,
+        )
         if tool_problem is not None:
             self._reject(target_msg, f"cannot start from the current tool pose: {tool_problem}")
             return False
@@ -310,6 +325,15 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     # --- the cycle -------------------------------------------------------------------------------
 
+    def publish_safe_output(self) -> None:
+        """After a failed cycle: stop streaming and hold the last goal (sent again, at zero twist)."""
+        if not self.supervisor.stop("stopped streaming after a cycle error; holding the last goal"):
+            return
+        if self._last_goal_pose is not None:
+            stamp_ns = self.get_clock().now().nanoseconds
+            self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, self._last_goal_pose))
+            self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, np.zeros(3), np.zeros(3)))
+
     def _cycle(self, now_ns: int) -> None:
         target = self._take_inputs(now_ns)
         supervisor = self.supervisor
@@ -321,6 +345,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             pose, (angular, linear) = supervisor.motion.sample(t)
             stamp_ns = self.get_clock().now().nanoseconds
             self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
+            self._last_goal_pose = pose
             self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
             if finished:
                 supervisor.finish(conv.stamp_key(conv.ns_to_stamp(stamp_ns)))
@@ -343,11 +368,25 @@ class TrajectoryGeneratorNode(LoopingNode):
             ("rejected_targets", str(supervisor.rejected_targets)),
             ("rejected_stamp", supervisor.rejected_stamp),
             ("last_rejection", supervisor.last_rejection),
+            ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
-        status = conv.make_diagnostic_status(
-            self.status_name, supervisor.level, supervisor.state, self.model.name, values
-        )
+        level = self.diagnostic_level(supervisor.level)
+        status = conv.make_diagnostic_status(self.status_name, level, supervisor.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+
+
+def _check_limits(limits: MotionLimits, bounds: InputBounds) -> None:
+    """Refuse speed limits far beyond what the arm can do (a typo such as 1e30 m/s)."""
+    for name, value, valid in (
+        ("max_linear_velocity", limits.max_linear_velocity, bounds.max_twist_linear),
+        ("max_angular_velocity", limits.max_angular_velocity, bounds.max_twist_angular),
+        ("max_linear_acceleration", limits.max_linear_acceleration, UNBOUNDED),
+        ("max_angular_acceleration", limits.max_angular_acceleration, UNBOUNDED),
+    ):
+        if value > valid:
+            raise InvalidArgumentError(
+                f"parameter {name} = {value:g} is absurd for this arm; valid: <= {valid:.4g} (twice what it can do)"
+            )
 
 
 def main(argv=None) -> int:

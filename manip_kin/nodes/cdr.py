@@ -1,0 +1,278 @@
+"""Pre-serialised (CDR) messages for the 1 kHz loops, and decoders of the 1 kHz inputs.
+
+rclpy converts a Python message to C field by field (~10 µs for a PoseStamped) before
+serialising it; publishing bytes that are already CDR skips both and halves the cost of a
+publish. The encoders write the little-endian CDR (XCDR1, what rmw_fastrtps and
+rmw_cyclonedds exchange) of the few fixed-shape messages the loops publish, into one
+precompiled ``struct.Struct`` each; the tests check every one against
+``rclpy.serialization.serialize_message``. The decoders read the inputs that arrive every
+cycle straight from their bytes, falling back to ``deserialize_message`` for anything
+unusual.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+
+import numpy as np
+from std_msgs.msg import Float64MultiArray
+
+from manip_kin.nodes.validation import InvalidMessageError, JointStateMapper
+from manip_kin.rotations import matrix_to_quat, quaternion_from_entries
+
+_NS_PER_S = 1_000_000_000
+_CDR_LE = b"\x00\x01\x00\x00"  # encapsulation: CDR, little endian
+
+
+class _CdrLayout:
+    """Builds a ``struct`` format with CDR alignment (relative to the payload start)."""
+
+    def __init__(self):
+        self.parts = ["<4s"]  # the encapsulation header, not part of the aligned payload
+        self.offset = 0
+
+    def align(self, size: int) -> None:
+        pad = (-self.offset) % size
+        if pad:
+            self.parts.append(f"{pad}x")
+            self.offset += pad
+
+    def add(self, code: str, size: int, count: int = 1) -> None:
+        self.align(size)
+        self.parts.append(f"{count}{code}" if count != 1 else code)
+        self.offset += size * count
+
+    def add_string(self, text: str) -> bytes:
+        data = text.encode() + b"\x00"
+        self.add("I", 4)
+        self.parts.append(f"{len(data)}s")
+        self.offset += len(data)
+        return data
+
+    def header(self, frame_id: str) -> bytes:
+        """``std_msgs/Header``: stamp (sec, nanosec), then frame_id; returns the frame bytes."""
+        self.add("i", 4)
+        self.add("I", 4)
+        return self.add_string(frame_id)
+
+    def compile(self) -> struct.Struct:
+        return struct.Struct("".join(self.parts))
+
+
+def _stamp_parts(stamp_ns: int) -> tuple[int, int]:
+    return divmod(int(stamp_ns), _NS_PER_S)
+
+
+def quaternion_of_pose_values(values) -> tuple[float, float, float, float]:
+    """Unit quaternion ``(x, y, z, w)``, ``w >= 0``, of the rotation in a row-major 4x4 pose."""
+    return quaternion_from_entries(
+        values[0], values[1], values[2], values[4], values[5], values[6], values[8], values[9], values[10]
+    )
+
+
+class PoseStampedCdr:
+    """Serialised ``geometry_msgs/PoseStamped`` with a fixed frame id.
+
+    Args:
+        frame_id: the header's frame id.
+    """
+
+    def __init__(self, frame_id: str):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 7)
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, matrix: np.ndarray) -> bytes:
+        """CDR bytes of the pose ``matrix`` (4x4) stamped ``stamp_ns`` [ns since epoch]."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        qx, qy, qz, qw = matrix_to_quat(matrix[:3, :3]).tolist()
+        x, y, z = matrix[:3, 3].tolist()
+        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, x, y, z, qx, qy, qz, qw)
+
+    def encode_values(self, stamp_ns: int, values) -> bytes:
+        """CDR bytes of a pose given as 16 row-major floats (the unrolled kinematics' output)."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        qx, qy, qz, qw = quaternion_of_pose_values(values)
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, values[3], values[7], values[11], qx, qy, qz, qw
+        )
+
+
+class TwistStampedCdr:
+    """Serialised ``geometry_msgs/TwistStamped`` with a fixed frame id."""
+
+    def __init__(self, frame_id: str):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 6)
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, angular: np.ndarray, linear: np.ndarray) -> bytes:
+        """CDR bytes of ``linear`` [m/s] and ``angular`` [rad/s] velocity stamped ``stamp_ns``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *linear.tolist(), *angular.tolist()
+        )
+
+    def encode_values(self, stamp_ns: int, twist) -> bytes:
+        """CDR bytes of a twist given as 6 floats ``(wx, wy, wz, vx, vy, vz)``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        wx, wy, wz, vx, vy, vz = twist
+        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, vx, vy, vz, wx, wy, wz)
+
+
+class JointStateCdr:
+    """Serialised ``sensor_msgs/JointState`` with fixed names, positions and velocities (no effort).
+
+    Args:
+        names: joint names, model order.
+        frame_id: the header's frame id (empty for joint states, as robot drivers send them).
+    """
+
+    def __init__(self, names: Sequence[str], frame_id: str = ""):
+        layout = _CdrLayout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("I", 4)
+        self._names: list[object] = [len(names)]
+        for name in names:
+            data = layout.add_string(name)
+            self._names += [len(data), data]
+        count = len(names)
+        for _ in range(2):  # position, velocity
+            layout.add("I", 4)
+            if count:
+                layout.add("d", 8, count)
+        layout.add("I", 4)  # effort: empty
+        self._count = count
+        self._struct = layout.compile()
+
+    def encode(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> bytes:
+        """CDR bytes of ``position`` and ``velocity`` (shape (n,)) stamped ``stamp_ns``."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        n = self._count
+        return self._struct.pack(
+            _CDR_LE,
+            sec,
+            nanosec,
+            self._frame_length,
+            self._frame,
+            *self._names,
+            n,
+            *position.tolist(),
+            n,
+            *velocity.tolist(),
+            0,
+        )
+
+    def encode_values(self, stamp_ns: int, position, velocity) -> bytes:
+        """CDR bytes of positions and velocities given as float sequences of length n."""
+        sec, nanosec = _stamp_parts(stamp_ns)
+        n = self._count
+        return self._struct.pack(
+            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names, n, *position, n, *velocity, 0
+        )
+
+
+class Float64ArrayCdr:
+    """Serialised ``std_msgs/Float64MultiArray`` of ``size`` values with an empty layout."""
+
+    def __init__(self, size: int):
+        layout = _CdrLayout()
+        layout.add("I", 4)  # layout.dim: empty sequence
+        layout.add("I", 4)  # layout.data_offset
+        layout.add("I", 4)  # data length
+        if size:
+            layout.add("d", 8, size)
+        self._size = size
+        self._struct = layout.compile()
+
+    def encode(self, values: np.ndarray) -> bytes:
+        """CDR bytes of ``values``, shape (size,)."""
+        return self._struct.pack(_CDR_LE, 0, 0, self._size, *values.tolist())
+
+
+# --- decoding the 1 kHz inputs from their CDR bytes ---------------------------------------------
+
+
+def _align(offset: int, size: int) -> int:
+    return offset + (-offset) % size
+
+
+class JointStateDecoder:
+    """Model-order positions from serialised ``JointState`` bytes (``take_message(raw=True)``).
+
+    Building the Python message costs ~30 µs per ``JointState``; a driver sends the same
+    names in the same order every time, so after the first message the decoder checks
+    that the header's frame id and the names are byte-identical to the learned ones and
+    reads the positions straight from the buffer. Anything else (other names or order,
+    other frame id) goes through ``deserialize_message`` and :class:`JointStateMapper`.
+
+    Args:
+        joint_names: the model's joint names in model order.
+    """
+
+    def __init__(self, joint_names: Sequence[str], lower=None, upper=None):
+        from sensor_msgs.msg import JointState as _JointState
+
+        self._msg_type = _JointState
+        self._mapper = JointStateMapper(joint_names, lower, upper)
+        self._count = len(joint_names)
+        self._blob: bytes | None = None
+        self._count_at = 0
+        self._values_at = 0
+
+    def positions(self, data: bytes) -> np.ndarray:
+        """Positions in model order, shape (n,); :class:`InvalidMessageError` as :class:`JointStateMapper`."""
+        blob = self._blob
+        if blob is not None and data[12 : 12 + len(blob)] == blob and len(data) >= self._count_at + 4:
+            (count,) = struct.unpack_from("<I", data, self._count_at)
+            if count == self._count and len(data) >= self._values_at + 8 * count:
+                values = np.frombuffer(data, dtype="<f8", count=count, offset=self._values_at).copy()
+                return self._mapper.check_positions(values)
+        msg = _deserialize(data, self._msg_type, "joint state")
+        values = self._mapper.positions(msg)
+        if list(msg.name) == self._mapper.joint_names and len(msg.position) == self._count:
+            self._learn(data)
+        return values
+
+    def _learn(self, data: bytes) -> None:
+        # Payload offsets (after the 4-byte encapsulation): stamp 0..8, frame_id at 8.
+        (frame_length,) = struct.unpack_from("<I", data, 4 + 8)
+        offset = _align(8 + 4 + frame_length, 4)
+        (name_count,) = struct.unpack_from("<I", data, 4 + offset)
+        offset += 4
+        for _ in range(name_count):
+            offset = _align(offset, 4)
+            (length,) = struct.unpack_from("<I", data, 4 + offset)
+            offset += 4 + length
+        self._blob = bytes(data[12 : 4 + offset])
+        count_offset = _align(offset, 4)
+        self._count_at = 4 + count_offset
+        self._values_at = 4 + _align(count_offset + 4, 8)
+
+
+def decode_float64_array(data: bytes) -> np.ndarray:
+    """The ``data`` of serialised ``Float64MultiArray`` bytes as a float64 vector (a copy)."""
+    dimensions = struct.unpack_from("<I", data, 4)[0] if len(data) >= 8 else 1
+    if dimensions == 0 and len(data) >= 16:
+        (count,) = struct.unpack_from("<I", data, 12)
+        if len(data) >= 20 + 8 * count:
+            return np.frombuffer(data, dtype="<f8", count=count, offset=20).copy() if count else np.zeros(0)
+    return np.array(_deserialize(data, Float64MultiArray, "joint velocity command").data, dtype=float)
+
+
+def _deserialize(data: bytes, msg_type, what: str):
+    """``deserialize_message``, with undecodable bytes as :class:`InvalidMessageError`."""
+    from rclpy.serialization import deserialize_message
+
+    try:
+        return deserialize_message(data, msg_type)
+    except Exception as error:  # noqa: BLE001 - whatever the C layer raises for bad bytes
+        raise InvalidMessageError(
+            f"{what} bytes cannot be decoded ({type(error).__name__}); valid: CDR of {msg_type.__name__}"
+        ) from None
