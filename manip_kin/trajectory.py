@@ -217,6 +217,10 @@ class LineTrajectory:
         """A line from ``start`` to ``goal`` timed by the fastest ``kind`` scaling within ``limits``."""
         start = check_finite(start, "start pose")
         goal = check_finite(goal, "goal pose")
+        for pose, what in ((start, "start pose"), (goal, "goal pose")):
+            if pose.shape != (4, 4):
+                raise InvalidArgumentError(f"{what} has shape {pose.shape}; valid: (4, 4)")
+            check_rotation(pose[:3, :3], f"{what} rotation")
         length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
         angle = float(np.linalg.norm(matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])))
         return cls(start, goal, make_time_scaling(kind, length, angle, limits))

@@ -141,10 +141,14 @@ class LoopWaiter:
         node: the node (its context owns the wait set).
         subscriptions: the :class:`PolledSubscription` s whose messages should wake the loop.
 
-    :meth:`wait` returns True when it returned early because one of them has data.
+    :meth:`wait` returns True when it returned early because one of them has data. While
+    :attr:`enabled` is False it just sleeps (a node turns waking off while messages stream
+    in at its own rate anyway: there is nothing to gain then, and the cycle is better kept
+    on its own schedule).
     """
 
     def __init__(self, node: Node, subscriptions: list[PolledSubscription]):
+        self.enabled = True
         self._subscriptions = list(subscriptions)
         self._event = threading.Event()
         self._wait_set = None
@@ -165,6 +169,9 @@ class LoopWaiter:
     def wait(self, timeout_ns: int) -> bool:
         """Block up to ``timeout_ns``; True when woken early by a message or :meth:`wake`."""
         if timeout_ns <= 0:
+            return False
+        if not self.enabled:
+            time.sleep(timeout_ns * 1e-9)
             return False
         event = self._event
         if event.is_set():
