@@ -55,5 +55,11 @@ def integrate_joint_rates(
             value = upper[i]
         q_next.append(value)
     inverse_dt = 1.0 / dt
-    applied = [(q_next[i] - q[i]) * inverse_dt for i in range(n)]
+    # The scaled rate, or what was left of it before a limit; never more: for a tiny dt the
+    # difference quotient alone can round above the velocity limit.
+    applied = []
+    for i in range(n):
+        rate = rates[i] * scale
+        moved = (q_next[i] - q[i]) * inverse_dt
+        applied.append(rate if abs(moved) >= abs(rate) else moved)
     return q_next, applied, scale, overshoot

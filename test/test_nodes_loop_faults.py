@@ -147,8 +147,8 @@ def test_generator_raising_stops_streaming_and_holds_last_goal(harness):
     harness.publish("/line_target", conv.make_pose_stamped(target, "base_link"))
     assert harness.spin_until(lambda: node.state == "streaming" and len(goals) > 20, 5, every=stream)
 
-    healthy_sample = type(node.line).sample
-    type(node.line).sample = _raise
+    healthy_sample = type(node.supervisor.motion).sample
+    type(node.supervisor.motion).sample = _raise
     try:
         _assert_error_reported(harness, diagnostics, "trajectory_generator")
         _assert_keeps_cycling(harness, node)
@@ -158,7 +158,7 @@ def test_generator_raising_stops_streaming_and_holds_last_goal(harness):
         harness.spin_for(0.2, every=stream)
         assert len(goals) == count  # no more streaming
     finally:
-        type(node.line).sample = healthy_sample
+        type(node.supervisor.motion).sample = healthy_sample
     # The last goal was sent again with a zero twist, and it lies on the line, short of the target.
     last = conv.pose_stamped_to_matrix(goals[-1])
     np.testing.assert_allclose(last, conv.pose_stamped_to_matrix(goals[-2]), atol=1e-6)

@@ -181,7 +181,6 @@ class CartesianControllerNode(LoopingNode):
         LiveParameters(self, PARAMETERS, self._set_parameters)
         self._goal_stream_gap_ns = int(5e9 / self.rate_hz)  # goals closer than 5 periods: a stream
         self._goal_arrival_ns = 0
->>>>>>> 8202569 (Property-based tests (hypothesis, derandomized) of every message handler and planner/control entry point; line plans check their poses first; the control step refuses absurd finite q/goals instead of returning NaN; the controller wakes on a goal only after a quiet spell (not while a line streams))
 
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
         self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
@@ -348,7 +347,6 @@ class CartesianControllerNode(LoopingNode):
             # stream in every cycle (a line), which keeps the loop on its own schedule.
             self.waiter.enabled = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
         if supervisor.report_due(now_ns):
->>>>>>> 8202569 (Property-based tests (hypothesis, derandomized) of every message handler and planner/control entry point; line plans check their poses first; the control step refuses absurd finite q/goals instead of returning NaN; the controller wakes on a goal only after a quiet spell (not while a line streams))
             self._publish_diagnostics(now_ns)
 
     def _publish_diagnostics(self, now_ns: int) -> None:

@@ -139,7 +139,7 @@ class JointIntegrator:
     def step(self, command: np.ndarray | None, dt: float) -> None:
         """Advance by ``dt`` seconds with joint rates ``command`` (None: zero), shape (n,)."""
         n = self._n
-        if command is None or dt <= 0.0:
+        if command is None or not dt >= 1e-9:  # below the clock's resolution: no step (1/dt would overflow)
             if self.velocity_scale == 1.0 and not any(self.qdot_values):
                 return  # at rest and still at rest: poses unchanged, twists zero
             self.qdot_values = [0.0] * n
