@@ -46,6 +46,9 @@ from manip_kin.model import RobotModel
 from manip_kin.rotations import matrix_to_rotvec, rotvec_from_entries
 from manip_kin.tasks import Task, parse_task
 
+#: q or goal coordinates beyond this [rad | m] are absurd (finite, but they overflow the step).
+_ABSURD = 1e100
+
 
 @dataclass(frozen=True)
 class ControllerConfig:
@@ -271,7 +274,15 @@ class CartesianController:
             goal = _goal_rows(goal_pose)
         feed_forward = _NO_FEED_FORWARD if goal_twist is None else _feed_forward_values(goal_twist)
         try:
-            output = self._step(q_values, goal, feed_forward, dt)
+            # Finite but absurd q or goal position (1e300) would overflow the step into NaN rates.
+            if (
+                -_ABSURD < min(q_values)
+                and max(q_values) < _ABSURD
+                and abs(goal[0][3]) + abs(goal[1][3]) + abs(goal[2][3]) < _ABSURD
+            ):
+                output = self._step(q_values, goal, feed_forward, dt)
+            else:
+                output = None
         except (ArithmeticError, ValueError):
             output = None  # the input is unusable (a wrong q length, a degenerate goal): say why
         if output is None:
@@ -292,6 +303,11 @@ class CartesianController:
             return InvalidArgumentError("goal_pose rotation is not a rotation matrix; valid: orthonormal with det +1")
         if not math.isfinite(sum(error) + sum(feed_forward)):
             return NonFiniteError("the goal pose or the goal twist")
+        if not (-_ABSURD < min(q_values) and max(q_values) < _ABSURD):
+            return InvalidArgumentError(f"q = {q_values}; valid: |values| < {_ABSURD:g} (positions of an arm)")
+        position = [goal[0][3], goal[1][3], goal[2][3]]
+        if not abs(position[0]) + abs(position[1]) + abs(position[2]) < _ABSURD:
+            return InvalidArgumentError(f"goal position {position}; valid: |values| < {_ABSURD:g} m")
         return NonFiniteError("the Jacobian (q or the model)")
 
     def _redistribute(
