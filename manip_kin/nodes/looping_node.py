@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
-from manip_kin.nodes.polling import LoopWaiter, PolledSubscription
+from manip_kin.nodes.polling import LoopWaiter, PolledSubscription, fast_path_problem
 from manip_kin.nodes.rate_loop import RateLoop, stats_key_values
 from manip_kin.nodes.throttled_log import ThrottledLog, safe_log
 
@@ -77,6 +77,9 @@ class LoopingNode(Node):
             on_fatal=self._on_loop_gave_up,
             give_up_after=self.GIVE_UP_AFTER_S,
         )
+        problem = fast_path_problem()
+        if problem:
+            self.get_logger().info(f"inputs read through the public rclpy API (more CPU): {problem}")
         if self.loop.realtime_priority:
             self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
         self.loop.start()
