@@ -13,7 +13,7 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: venv demo test lint format bench bench-anchors clean
+.PHONY: venv demo test lint format bench bench-anchors soak clean
 
 venv: $(STAMP)
 
@@ -56,6 +56,12 @@ $(ANCHORS_STAMP): bench/requirements-anchors.txt setup.py
 
 bench-anchors: $(ANCHORS_STAMP)
 	$(ANCHORS_VENV)/bin/python bench/anchors.py --out bench/results/anchors.json
+
+# Full pipeline + recorder at 1 kHz, lines alternating (issue 8); not part of `make test`.
+# `make soak SOAK_MINUTES=1` for a short run.
+SOAK_MINUTES ?= 10
+soak: $(STAMP)
+	$(VPY) bench/soak.py --minutes $(SOAK_MINUTES) --out bench/results/soak.json
 
 clean:
 	rm -rf $(VENV) $(ANCHORS_VENV) build install log *.egg-info .pytest_cache
