@@ -1,0 +1,143 @@
+"""Live nodes fed the odd but well-formed messages of issue 8: rejected, logged once, node keeps working.
+
+The burst that once killed the generator (a line target hundreds of orders of magnitude
+beyond any reach) and its relatives go to the running nodes; each must be rejected with a
+reason naming what was received and what is valid, the previous good state kept, the
+outputs finite and within the limits, and the node must still do its job afterwards.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from node_harness import Harness, statuses
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from manip_kin.bounds import InputBounds
+from manip_kin.kinematics import frame_pose
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.cartesian_controller import CartesianControllerNode
+from manip_kin.nodes.robot_state import RobotStateNode
+from manip_kin.nodes.trajectory_generator import TrajectoryGeneratorNode
+from manip_kin.robots import load_robot
+from manip_kin.rotations import make_transform
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+def _pose(xyz, quaternion=(0.0, 0.0, 0.0, 1.0)) -> PoseStamped:
+    msg = conv.make_pose_stamped(np.eye(4), "base_link")
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = xyz
+    o.x, o.y, o.z, o.w = quaternion
+    return msg
+
+
+def test_generator_survives_the_burst_and_follows_a_line_after(harness, capfd):
+    model = load_robot("irb120")
+    q0 = np.zeros(6)
+    start = frame_pose(model, q0)
+    goals = harness.collect(PoseStamped, "/goal_pose")
+    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=200.0)
+    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+        harness.wait_matched(topic, msg_type)
+
+    def stream():
+        now = harness.node.get_clock().now().to_msg()
+        harness.publish("/tool_pose", conv.make_pose_stamped(start, "base_link", now))
+        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0))
+
+    harness.spin_for(0.1, every=stream)
+    burst = [
+        _pose((1e300, 0.0, 0.5)),  # the issue's target: time scaling divided by zero
+        _pose((1.7e308, -1.7e308, 1.7e308)),
+        _pose((0.0, 0.0, 5e-324), (5e-324, 0.0, 0.0, 5e-324)),  # subnormal quaternion
+        _pose((0.3, 0.1, 0.5), (0.0, 0.0, 0.0, 0.0)),
+        _pose((0.3, 0.1, 0.5), (1e300, 1e300, 0.0, 0.0)),
+        _pose((3.0 * InputBounds.of(model).reach_radius, 0.0, 0.0)),
+        _pose((math.nan, 0.0, 0.0)),
+        _pose((0.0, -math.inf, 0.0)),
+    ]
+    for msg in burst:
+        harness.publish("/line_target", msg)
+    assert harness.spin_until(lambda: node.rejected_targets == len(burst), 5, every=stream), node.last_rejection
+    assert node.loop.running and node.loop.stats().errors == 0 and not goals
+    logged = capfd.readouterr().err
+    # One line per kind of problem (reach, quaternion, finite): throttled, not one per message.
+    assert "is 1e+300 m from the base; valid: within" in logged
+    assert "has length 4.94066e-324; valid: unit length" in logged and "NaN or infinity" in logged
+    assert not any(s.level == DiagnosticStatus.ERROR for s in statuses(diagnostics, "trajectory_generator"))
+    # Still follows a valid line.
+    target = make_transform(np.eye(3), [0.374, 0.15, 0.55])
+    harness.publish("/line_target", conv.make_pose_stamped(target, "base_link"))
+    assert harness.spin_until(lambda: node.state == "holding", 10, every=stream)
+    np.testing.assert_allclose(conv.pose_stamped_to_matrix(goals[-1]), target, atol=1e-9)
+
+
+def test_controller_rejects_absurd_goals_twists_and_joint_states(harness, capfd):
+    model = load_robot("genova7")
+    q0 = model.start_configuration()
+    commands = harness.collect(Float64MultiArray, "/joint_velocity_commands")
+    node = harness.start(CartesianControllerNode, robot="genova7", rate_hz=250.0)
+    for topic, msg_type in (("/joint_states", JointState), ("/goal_pose", PoseStamped), ("/goal_twist", TwistStamped)):
+        harness.wait_matched(topic, msg_type)
+    state = {"msg": conv.make_joint_state(model.joint_names, q0)}
+
+    def stream():
+        harness.publish("/joint_states", state["msg"])
+
+    good = frame_pose(model, q0)
+    good[2, 3] += 0.05
+    harness.publish("/goal_pose", conv.make_pose_stamped(good, "base_link"))
+    assert harness.spin_until(lambda: commands and any(commands[-1].data), 5, every=stream)
+    for msg in (_pose((1e300, 0.0, 0.0)), _pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 5e-324))):
+        harness.publish("/goal_pose", msg)
+    huge = conv.make_twist_stamped([0.0, 0.0, 1e6], [1e300, 0.0, 0.0], "base_link")
+    harness.publish("/goal_twist", huge)
+    assert harness.spin_until(lambda: node.rejected_goals == 2 and node.rejected_twists == 1, 5, every=stream)
+    # Joint states: duplicated names, empty, absurd finite positions (each sent for a while).
+    bad_states = [
+        conv.make_joint_state([model.joint_names[0]] * 7, q0),
+        conv.make_joint_state([], []),
+        conv.make_joint_state(model.joint_names, np.full(7, 1e300)),
+    ]
+    for bad in bad_states:
+        state["msg"] = bad
+        before = node.rejected_joint_states
+        assert harness.spin_until(lambda before=before: node.rejected_joint_states > before, 5, every=stream)
+    logged = capfd.readouterr().err
+    # (the empty one is a name problem like the duplicates: same kind, so its line is held back)
+    assert "more than once; valid: each joint once" in logged and "out of range; valid: [" in logged
+    assert "too fast; valid: at most" in logged
+    # The previous good goal is kept; commands stayed finite and within the velocity limits.
+    np.testing.assert_allclose(node.goal, good, atol=1e-12)
+    data = np.array([c.data for c in commands])
+    assert np.all(np.isfinite(data)) and np.all(np.abs(data) <= model.velocity_limits * (1 + 1e-9))
+    # The stale joint state (only bad ones since) leads to zeros; a good one resumes tracking.
+    state["msg"] = conv.make_joint_state(model.joint_names, q0)
+    assert harness.spin_until(lambda: commands and any(commands[-1].data), 5, every=stream)
+    assert node.loop.stats().errors == 0
+
+
+def test_robot_state_rejects_absurd_commands(harness, capfd):
+    model = load_robot("genova7")
+    states = harness.collect(JointState, "/joint_states")
+    node = harness.start(RobotStateNode, robot="genova7", rate_hz=250.0)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    for data in ([1e300] * 7, [1.7e308, -1.7e308, 0.0, 0.0, 0.0, 0.0, 0.0], [], [5e-324] * 6):
+        harness.publish("/joint_velocity_commands", Float64MultiArray(data=data))
+    assert harness.spin_until(lambda: node.rejected_commands == 4, 5)
+    assert "absurd; valid: |value| <=" in capfd.readouterr().err
+    harness.spin_for(0.1)
+    positions = np.array([s.position for s in states])
+    assert np.all(np.isfinite(positions)) and all(model.within_limits(q) for q in positions)
+    np.testing.assert_allclose(positions[-1], model.start_configuration())
