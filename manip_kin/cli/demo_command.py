@@ -181,7 +181,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
         summary_code = pipeline.stop_process("recorder", timeout=10.0)
         recorder_lines = [line for line in pipeline.log_text("recorder").splitlines() if line.strip()]
         if recorder_lines:
-            print(f"recorder: {recorder_lines[-1]}")
+            print(recorder_lines[-1])  # the recorder's own summary line, "recorder: recorded ..."
         if summary_code not in (0, None):
             print(f"recorder exited with {summary_code}", file=sys.stderr)
     _heading(f"4/4 the recording: {out}")
