@@ -39,7 +39,9 @@ class Harness:
         qos = (
             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
             if latched
-            else 100
+            # Deep: the nodes under test run in this process and compete for the GIL; when this
+            # executor falls behind a 100-deep queue dropped the oldest messages (a line's start).
+            else 10000
         )
         self.node.create_subscription(msg_type, topic, received.append, qos)
         return received

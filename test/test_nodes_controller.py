@@ -318,3 +318,16 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
         assert node.loop.realtime_error == ""
         assert os.sched_getscheduler(node.loop._thread.native_id) == os.SCHED_FIFO
     assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
+
+
+def test_diagnostics_rate_parameter(harness):
+    """diagnostics_rate_hz 2 (default 10): in a steady state statuses come 0.5 s apart, never closer."""
+    node, _, diagnostics = _start(harness, diagnostics_rate_hz=2.0)
+    stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
+    assert harness.spin_until(lambda: node.state == "idle", 5, every=stream)
+    diagnostics.clear()
+    assert harness.spin_until(lambda: len(statuses(diagnostics, "cartesian_controller")) >= 3, 10, every=stream)
+    stamps = [conv.stamp_to_ns(msg.header.stamp) for msg in diagnostics]
+    # A lower bound (a loaded machine can only space them further): 0.5 s less 20 ms of
+    # stamping jitter; at the default 10 Hz they would be 0.1 s apart.
+    assert min(np.diff(stamps)) > 0.48e9, np.diff(stamps)

@@ -56,9 +56,12 @@ def test_publishes_state_poses_twists_and_description(harness):
     assert started <= stamp_to_seconds(state.header.stamp) <= time.time()  # stamped with the system time
     stamps = [stamp_to_seconds(m.header.stamp) for m in joint_states]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
-    # 200 Hz is the behaviour: the loop keeps 5 ms deadlines, so the median spacing is 5 ms even
-    # when single cycles are late on a loaded machine (0.5 ms margin for sleep overshoot).
-    assert abs(np.median(np.diff(stamps)) - 0.005) < 0.0005, np.median(np.diff(stamps))
+    # rate_hz 200 (default 500): the loop's deadlines are 5 ms apart and it never catches up, so
+    # 10 consecutive cycles last at least 47.5 ms (test_nodes_plumbing); the stamps are read
+    # after each cycle's work, which a loaded machine delays, hence the 10th percentile and
+    # 45 ms. At 500 Hz they would last 20 ms. (Too slow is the machine, not the node.)
+    ten_cycles = np.array(stamps[10:]) - np.array(stamps[:-10])
+    assert np.percentile(ten_cycles, 10) > 0.045, ten_cycles
 
     tool = tool_poses[-1]
     assert tool.header.frame_id == "base_link"
@@ -76,7 +79,7 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     joint_states = harness.collect(JointState, "/joint_states")
     ee_twists = harness.collect(TwistStamped, "/ee_twist")
     tool_poses = harness.collect(PoseStamped, "/tool_pose")
-    harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, command_timeout=0.1)
+    harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, command_timeout=0.5)  # default 0.1
     harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
     command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
     last_sent = [0.0]
@@ -90,18 +93,8 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     np.testing.assert_allclose(state.velocity, command, atol=1e-9)
     moved = np.array(state.position)
     np.testing.assert_allclose(moved, command * (moved[0] / command[0]), atol=1e-9)  # moved along the command
-    # q advances by q̇ times the time between cycles, at most 3 periods after a stall (a simulated
-    # arm does not jump). Over 20 cycles the displacement is the command times the stamp
-    # differences so capped; 0.2 ms of margin: the stamp is read after the cycle's work, which a
-    # loaded machine delays (the error does not add up over the cycles, only the ends count).
-    moving = [m for m in joint_states if np.allclose(m.velocity, command, atol=1e-9)]
-    assert len(moving) > 20
-    elapsed = sum(
-        min(stamp_to_seconds(b.header.stamp) - stamp_to_seconds(a.header.stamp), 3 / 250)
-        for a, b in zip(moving[-21:], moving[-20:])
-    )
-    displacement = np.subtract(moving[-1].position, moving[-21].position)
-    np.testing.assert_allclose(displacement, command * elapsed, atol=2e-4 * np.abs(command).max())
+    # How far per cycle is the integrator's business (test_joint_integrator_steps below, exact);
+    # stamps are read after the cycle's work, which a loaded machine delays by milliseconds.
     # Twist = J(q) q̇ at the same cycle (the ee twist message with the same stamp).
     by_stamp = {stamp_to_seconds(m.header.stamp): m for m in ee_twists}
     state = next(s for s in reversed(joint_states) if stamp_to_seconds(s.header.stamp) in by_stamp)
@@ -113,7 +106,7 @@ def test_integrates_commands_with_twists_and_times_out(harness):
     # Commands stop: after command_timeout the arm holds still.
     assert harness.spin_until(lambda: not any(joint_states[-1].velocity), 5)
     # Not before command_timeout: the node took the last command after it was sent (a lower bound).
-    assert time.monotonic() - last_sent[0] > 0.1
+    assert time.monotonic() - last_sent[0] > 0.5
     held = np.array(joint_states[-1].position)
     count = len(joint_states)
     assert harness.spin_until(lambda: len(joint_states) >= count + 25, 5)  # 0.1 s of states at 250 Hz
@@ -204,7 +197,7 @@ def test_ee_and_tool_twists_of_a_moving_arm_with_a_tool(harness):
     joint_states = harness.collect(JointState, "/joint_states")
     ee_twists = harness.collect(TwistStamped, "/ee_twist")
     tool_twists = harness.collect(TwistStamped, "/tool_twist")
-    harness.start(RobotStateNode, robot="genova7", rate_hz=250.0)
+    harness.start(RobotStateNode, robot="genova7", rate_hz=250.0, base_frame="world")
     harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
     command = np.array([0.3, -0.2, 0.25, 0.4, -0.3, 0.05, 0.5])
     send = lambda: harness.publish("/joint_velocity_commands", array_to_multiarray(command))  # noqa: E731
@@ -220,6 +213,7 @@ def test_ee_and_tool_twists_of_a_moving_arm_with_a_tool(harness):
 
     state, ee, tool = harness.spin_until(matched, 10, every=send)
     q, qdot = np.array(state.position), np.array(state.velocity)
+    assert ee.header.frame_id == tool.header.frame_id == "world"  # base_frame (default base_link)
     for message, frame in ((ee, "ee"), (tool, "tool")):
         angular, linear = _numeric_twist(model, q, qdot, frame)
         received = twist_to_arrays(message.twist)
@@ -272,3 +266,46 @@ def test_continuous_joint_integrates_through_plus_minus_pi(harness, tmp_path):
             np.testing.assert_allclose(
                 pose_stamped_to_matrix(pose), frame_pose(model, np.array(message.position)), atol=1e-9
             )
+
+
+def test_diagnostics_rate_zero_turns_them_off(harness):
+    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    joint_states = harness.collect(JointState, "/joint_states")
+    harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, diagnostics_rate_hz=0.0)
+    # 250 states (1 s) without a status; at the default 2 Hz two or more would have come.
+    assert harness.spin_until(lambda: len(joint_states) >= 250, 10)
+    assert not statuses(diagnostics, "robot_state")
+
+
+def test_joint_integrator_steps():
+    """q ← q + q̇·dt, the whole vector scaled into the velocity limits, clamped at position
+    limits with the velocity of the clamped step reported (exact, no ROS, no clock)."""
+    from manip_kin.nodes.robot_state import JointIntegrator
+
+    model = load_robot("genova7")
+    q0 = model.start_configuration()
+    integrator = JointIntegrator(model, q0)
+    command = np.array([0.2, -0.1, 0.3, 0.0, 0.1, 0.05, -0.4])
+    for dt in (0.002, 0.004, 0.0013):
+        before = np.array(integrator.q_values)
+        integrator.step(command, dt)
+        np.testing.assert_allclose(np.array(integrator.q_values) - before, command * dt, atol=1e-15)
+        np.testing.assert_allclose(integrator.qdot_values, command, atol=1e-12)
+    np.testing.assert_allclose(integrator.q_values, q0 + command * (0.002 + 0.004 + 0.0013), atol=1e-14)
+    assert integrator.velocity_scale == 1.0
+    # 10 rad/s on joint 1 (limit 2): everything scaled by 0.2.
+    fast = np.array([10.0, 1.0, 0, 0, 0, 0, 0])
+    before = np.array(integrator.q_values)
+    integrator.step(fast, 0.01)
+    assert integrator.velocity_scale == pytest.approx(0.2)
+    np.testing.assert_allclose(np.array(integrator.q_values) - before, fast * 0.2 * 0.01, atol=1e-15)
+    # The prismatic joint (upper limit 0.3) pushed past it: clamped, velocity of the clamped step.
+    q = np.array(integrator.q_values)
+    up = np.zeros(7)
+    up[5] = 0.5
+    integrator.step(up, 1.0)
+    assert integrator.q_values[5] == 0.3 and integrator.at_limit[5]
+    assert integrator.qdot_values[5] == pytest.approx(0.3 - q[5])
+    # No command: at rest, twists zero.
+    integrator.step(None, 0.01)
+    assert not any(integrator.qdot_values) and not any(integrator.tool_twist_values)
