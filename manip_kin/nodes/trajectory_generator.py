@@ -14,6 +14,7 @@ the current tool pose; a rejected target leaves a running line alone.
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -305,7 +306,11 @@ class TrajectoryGeneratorNode(LoopingNode):
             self._reject(target_msg, str(error))
             return False
         detail = f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
-        preempted = self.supervisor.start(line, "line", now_ns, conv.stamp_key(target_msg.header.stamp), detail)
+        # The line starts now that it is planned: planning (the reach check) can take longer
+        # than a period, and starting it at the cycle's time would skip its first part (a jump).
+        preempted = self.supervisor.start(
+            line, "line", time.monotonic_ns(), conv.stamp_key(target_msg.header.stamp), detail
+        )
         self.get_logger().info(
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.time_scaling} line "
             f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {detail}"
@@ -339,6 +344,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         supervisor = self.supervisor
         if target is not None:
             self._plan(target, now_ns)
+            now_ns = time.monotonic_ns()  # the loop's clock, after planning (see _plan)
         timing = supervisor.time_into_motion(now_ns)
         if timing is not None:
             t, finished = timing
