@@ -109,6 +109,12 @@ def run_replay(*arguments: str, timeout: float = 60) -> subprocess.CompletedProc
     return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
 
 
+def _remap(prefix: str) -> list[str]:
+    """Replay /joint_states on a topic of this test's own: nothing else in the session publishes
+    there, so what arrives is the replay's."""
+    return ["--remap", f"/joint_states:=/{prefix}/joint_states"]
+
+
 def wait_for(predicate, timeout: float = 20.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and not predicate():
@@ -151,9 +157,11 @@ def test_replay_reproduces_messages_timing_and_qos(recording, listener):
 
 
 def test_rate_two_halves_the_duration_and_clock_follows_the_recording(recording, listener):
-    states = listener.listen(JointState, "/joint_states", 100)
+    states = listener.listen(JointState, "/rate_two/joint_states", 100)
     clock = listener.listen(Clock, "/clock", QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
-    result = run_replay(str(recording), "--rate", "2", "--clock", "--topics", "/joint_states", "--quiet")
+    result = run_replay(
+        str(recording), "--rate", "2", "--clock", "--topics", "/joint_states", "--quiet", *_remap("rate_two")
+    )
     assert result.returncode == 0, result.stderr
     assert "replay:" not in result.stderr
     wait_for(lambda: len(states) == len(LOG_TIMES))
@@ -169,8 +177,10 @@ def test_rate_two_halves_the_duration_and_clock_follows_the_recording(recording,
 
 
 def test_start_offset_skips_the_beginning(recording, listener):
-    states = listener.listen(JointState, "/joint_states", 100)
-    result = run_replay(str(recording), "--start-offset", "0.5", "--topics", "/joint_states", "--quiet")
+    states = listener.listen(JointState, "/offset/joint_states", 100)
+    result = run_replay(
+        str(recording), "--start-offset", "0.5", "--topics", "/joint_states", "--quiet", *_remap("offset")
+    )
     assert result.returncode == 0, result.stderr
     expected = [float(i) for i, t in enumerate(LOG_TIMES) if t >= LOG_TIMES[0] + 500 * MS]
     wait_for(lambda: len(states) >= len(expected))
@@ -196,8 +206,8 @@ def test_replay_rejects_unknown_topic_and_bad_rate(recording):
 
 
 def test_rate_below_one_stretches_the_recording(recording, listener):
-    states = listener.listen(JointState, "/joint_states", 100)
-    result = run_replay(str(recording), "--rate", "0.5", "--topics", "/joint_states", "--quiet")
+    states = listener.listen(JointState, "/half/joint_states", 100)
+    result = run_replay(str(recording), "--rate", "0.5", "--topics", "/joint_states", "--quiet", *_remap("half"))
     assert result.returncode == 0, result.stderr
     wait_for(lambda: len(states) == len(LOG_TIMES))
     assert [m.position[0] for _, m in states] == [float(i) for i in range(len(LOG_TIMES))]
@@ -224,8 +234,8 @@ def test_replay_of_a_bag_directory(tmp_path, listener):
             writer.write("/joint_states", JointState(name=["joint_1"], position=[float(i)]), log_time_ns=log_time)
     assert bag.is_dir() and (bag / "metadata.yaml").is_file()
     assert _rosbags_positions(bag) == [float(i) for i in range(10)]
-    states = listener.listen(JointState, "/joint_states", 100)
-    result = run_replay(str(bag), "--quiet")
+    states = listener.listen(JointState, "/bag_dir/joint_states", 100)
+    result = run_replay(str(bag), "--quiet", *_remap("bag_dir"))
     assert result.returncode == 0, result.stderr
     assert "replayed 10 messages on 1 topics" in result.stderr
     wait_for(lambda: len(states) == 10)
@@ -249,8 +259,8 @@ def test_replay_of_a_salvaged_file(tmp_path, listener):
     recovered = _rosbags_positions(saved)
     assert 0 < len(recovered) < len(LOG_TIMES)
     assert recovered == [float(i) for i in range(len(recovered))]  # a gap-free prefix
-    states = listener.listen(JointState, "/joint_states", 100)
-    result = run_replay(str(saved), "--quiet")
+    states = listener.listen(JointState, "/salvaged/joint_states", 100)
+    result = run_replay(str(saved), "--quiet", *_remap("salvaged"))
     assert result.returncode == 0, result.stderr
     wait_for(lambda: len(states) == len(recovered))
     assert [m.position[0] for _, m in states] == recovered
