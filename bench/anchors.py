@@ -28,8 +28,10 @@ What is timed (per call, Python caller, numpy arrays in and out):
 * ``batched_fk``: 100k configurations. manip_kin ``batch_frame_pose``; rtb ``ETS.fkine`` on the
   (N, n) array; pinocchio a Python loop (it has no batched FK in Python).
 
-Ratios are manip_kin / anchor per round (< 1: manip_kin faster; for batched FK the ratio is of
-times too); the table shows the median over rounds and the range.
+Times are CPU time of this process (``time.process_time_ns``), per call, summed over blocks
+of calls; wall time on a loaded shared machine mostly measures waiting for a core. Ratios are
+manip_kin / anchor per round (< 1: manip_kin faster; for batched FK the ratio is of times
+too); the table shows the median over rounds and the range.
 """
 
 from __future__ import annotations
@@ -186,8 +188,12 @@ def check_agreement(setup: Setup, configurations) -> float:
 
 
 def interleaved(candidates: dict, arguments: list, rounds: int, block: int) -> dict[str, list[float]]:
-    """Per-call times [µs], one per round, each library timing ``block`` calls in turn."""
-    clock = time.perf_counter_ns
+    """Per-call times [µs], one per round, each library timing ``block`` calls in turn.
+
+    The clock is this process's CPU time: on a shared machine wall time mostly measures how
+    long the process waited for a core, which is nobody's speed.
+    """
+    clock = time.process_time_ns
     names = list(candidates)
     for name in names:  # warm-up
         for argument in arguments[:100]:
@@ -223,6 +229,46 @@ def summarize(metric: str, label: str, times: dict[str, list[float]], unit: str 
                 "min": float(ratios.min()),
                 "max": float(ratios.max()),
             }
+    return row
+
+
+def singular_versus_regular(setup: Setup, step, cases: list, rounds: int) -> dict:
+    """manip_kin's control step near a singularity (σ_min < ε, damped) against a regular one.
+
+    The same cases as ``control_step``, split by the step's own ``singular`` flag; both kinds
+    timed in alternating blocks (CPU time), the ratio per round.
+    """
+    kinds = {"regular": [], "singular": []}
+    for case in cases:
+        kinds["singular" if step(case).singular else "regular"].append(case)
+    count = min(len(kinds["regular"]), len(kinds["singular"]))
+    if count == 0:
+        return {"metric": f"singular / regular control step {setup.label}", "note": "no singular case drawn"}
+    clock = time.process_time_ns
+    times = {"regular": [], "singular": []}
+    for _ in range(rounds):
+        sums = dict.fromkeys(times, 0)
+        for start in range(0, max(len(kinds["regular"]), len(kinds["singular"])), 100):
+            for kind, chosen in kinds.items():
+                chunk = chosen[start % len(chosen) : start % len(chosen) + 100]
+                begin = clock()
+                for case in chunk:
+                    step(case)
+                sums[kind] += (clock() - begin) / max(len(chunk), 1)
+        for kind in times:
+            times[kind].append(sums[kind])
+    ratios = np.array(times["singular"]) / np.array(times["regular"])
+    blocks = -(-max(len(kinds["regular"]), len(kinds["singular"])) // 100)
+    row = {"metric": f"singular / regular control step {setup.label}", "unit": "us"}
+    for kind in times:
+        values = np.array(times[kind]) / blocks / 1e3  # ns summed over blocks -> µs per call
+        row[kind] = {"median": float(np.median(values)), "min": float(values.min()), "max": float(values.max())}
+    row["singular_fraction"] = len(kinds["singular"]) / len(cases)
+    row["ratio_singular_to_regular"] = {
+        "median": float(np.median(ratios)),
+        "min": float(ratios.min()),
+        "max": float(ratios.max()),
+    }
     return row
 
 
@@ -300,6 +346,17 @@ def print_table(rows: list[dict]) -> None:
     width = max(len(row["metric"]) for row in rows)
     print(f"{'metric':<{width}}  {'manip_kin':>22}  {'pinocchio':>22}  {'rtb':>22}  ratios (median [min, max])")
     for row in rows:
+        if "regular" in row:
+            ratio = row["ratio_singular_to_regular"]
+            print(
+                f"{row['metric']:<{width}}  regular {row['regular']['median']:.3g} µs, singular "
+                f"{row['singular']['median']:.3g} µs ({100 * row['singular_fraction']:.1f} % of the steps): "
+                f"ratio {ratio['median']:.2f} [{ratio['min']:.2f}, {ratio['max']:.2f}]"
+            )
+            continue
+        if "manip_kin" not in row:
+            print(f"{row['metric']:<{width}}  {row.get('note', '')}")
+            continue
         cells = []
         for name in ("manip_kin", "pinocchio", "rtb"):
             if name not in row:
@@ -357,6 +414,7 @@ def main() -> int:
                 cases.append((q, make_transform(rotation, pose[:3, 3] + rng.normal(scale=0.03, size=3))))
             times = interleaved(timed["control_step"], cases, args.rounds, block=200)
             rows.append(summarize("control_step", setup.label, times))
+            rows.append(singular_versus_regular(setup, timed["control_step"]["manip_kin"], cases, args.rounds))
             print(f"[anchors] {setup.label}: IK ...", file=sys.stderr, flush=True)
             rows.append(bench_ik(setup, args.ik_targets, args.ik_rounds, args.seed))
             rows.append(bench_batched(setup, args.batch, max(3, args.rounds // 2), args.seed))

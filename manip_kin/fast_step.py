@@ -194,9 +194,6 @@ def step_source(
     deep = "                "
     lines.append(f"{deep}EIG = EIGENVALUES(({gram},), {m})")
     lines.append(f"{deep}SIGMA_SQ = EIG[0] if EIG[0] > 0.0 else 0.0")
-    lines.append(
-        f"{deep}MANIPULABILITY = sqrt(" + "*".join(f"(EIG[{i}] if EIG[{i}] > 0.0 else 0.0)" for i in range(m)) + ")"
-    )
     lines += inline_lines(damping_sq, ["SIGMA_SQ", repr(epsilon_sq), repr(damping_max_sq)], ["d"], "DS_", deep)
     lines.append(f"{deep}if d > 0.0:")
     lines += [deep + line.replace("return None", "continue") for line in _cholesky_body(m, shifted=True)]
