@@ -180,14 +180,18 @@ def step_source(
     # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops); see
     # unrolled_linalg.smallest_eigenvalue_bound.
     lines.append("        MANIPULABILITY = sqrt(DET)")
-    certificate_failed = (
-        [f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:"]
-        + ["        " + line for line in _inverse_trace_lines(m)]
-        + [f"            if inverse_trace * {epsilon_sq!r} > 1.0:"]
-        if m > 1
-        else [f"        if DET < {epsilon_sq!r}:", "            if True:"]
-    )
-    lines += certificate_failed
+    if m > 1:
+        # λ_min <= every Cholesky pivot (a pivot is a Schur complement, and eigenvalues
+        # interlace): a pivot below ε² proves a singularity without the inverse trace.
+        pivots = " or ".join(f"p{j} < {epsilon_sq!r}" for j in range(m))
+        lines.append(f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
+        lines.append(f"            UNCERTIFIED = {pivots}")
+        lines.append("            if not UNCERTIFIED:")
+        lines += ["            " + line for line in _inverse_trace_lines(m)]
+        lines.append(f"                UNCERTIFIED = inverse_trace * {epsilon_sq!r} > 1.0")
+        lines.append("            if UNCERTIFIED:")
+    else:
+        lines += [f"        if DET < {epsilon_sq!r}:", "            if True:"]
     # Possibly near a singularity: σ_min² from the eigenvalues of J Jᵀ (the a's above), the
     # damping from the one rule (damped_least_squares.damping_sq, inlined), a shifted solve.
     gram = ", ".join(f"a{max(i, k)}_{min(i, k)}" for i in range(m) for k in range(m))
