@@ -26,7 +26,7 @@ attempts start from random configurations (seedable) until one succeeds, ``resta
 used up or ``time_budget`` is spent. The result says why it failed.
 
 For speed, one iteration of ``lm``/``dls`` is a single generated function
-(:func:`manip_kin.fast_step.ik_iteration_source`); ``nr`` and the rare cases it hands back
+(:func:`manip_kin.ik_codegen.ik_iteration_source`); ``nr`` and the rare cases it hands back
 (singular systems) run the plain Python path below, which implements the same rules.
 """
 
@@ -43,7 +43,7 @@ from manip_kin.closed_form import nearest_closed_form
 from manip_kin.control import _pose_error_values
 from manip_kin.damped_least_squares import DampedSolver
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
-from manip_kin.fast_step import compile_ik_iteration
+from manip_kin.ik_codegen import compile_ik_iteration
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation

@@ -1,0 +1,129 @@
+"""One iteration of the damped least-squares IK as a single generated Python function.
+
+Built from the same pieces as the control step (:mod:`manip_kin.fast_step`): the model's
+unrolled chain, the pose error with the rotation vector inlined from
+:mod:`manip_kin.rotations`, and the unrolled damped solve of :mod:`manip_kin.unrolled_linalg`.
+:mod:`manip_kin.ik` runs it; its plain-Python path implements the same rules.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+from manip_kin.fast_step import _GENERATED_MATH, _chain_and_error_lines
+from manip_kin.unrolled_linalg import _product, _sum, damped_solve_lines, jacobian_entries
+
+
+def ik_iteration_source(
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    lower: Sequence[float],
+    upper: Sequence[float],
+    wraps: Sequence[bool],
+) -> str:
+    """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`).
+
+    ``iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position)`` with
+    ``q`` (n floats) and the target rows ``g`` evaluates the task error ``e`` at ``q`` and
+    returns ``(status, q_next, orientation_error, position_error)``:
+
+    * status 1: the errors are below the tolerances (``q_next`` is ``q``);
+    * status 2: a non-finite error or a singular system: run the general path instead;
+    * status 0: ``q_next = q + step·Δq`` with ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e``,
+      ``λ² = weight·|e|² + shift``, brought back within the limits.
+
+    A joint at a limit whose gradient ``(Jᵀe)_j`` points outside is held: its column is
+    zeroed so the other joints take the task. Other joints stepping past a limit are clipped
+    onto it, or wrapped by whole turns when their range spans a full turn (``wraps``).
+    """
+    n, m = dof, len(rows)
+    lines, tokens, constants = _chain_and_error_lines(
+        "def iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position):", chain, dof
+    )
+    clipped = [j for j in range(n) if not wraps[j] and not (math.isinf(lower[j]) and math.isinf(upper[j]))]
+    for i, r in enumerate(rows):
+        lines.append(f"    b{i} = E{r}")
+    orientation = [i for i, r in enumerate(rows) if r < 3]
+    position = [i for i, r in enumerate(rows) if r >= 3]
+    lines.append("    O = " + (f"sqrt({' + '.join(f'b{i}*b{i}' for i in orientation)})" if orientation else "0.0"))
+    lines.append("    P = " + (f"sqrt({' + '.join(f'b{i}*b{i}' for i in position)})" if position else "0.0"))
+    lines.append("    if O < tolerance_orientation and P < tolerance_position:")
+    lines.append("        return 1, q, O, P")
+    lines.append("    W = O + P")
+    lines.append("    if W - W != 0.0:")
+    lines.append("        return 2, q, O, P")
+    lines.append("    d = weight * (O * O + P * P) + shift")
+    # The columns of joints that can be held are locals (even their constant entries), so
+    # that they can be zeroed.
+    entries = jacobian_entries(n, rows, tokens, constants)
+    held_columns: dict[int, list[str]] = {}
+    for j in clipped:
+        held_columns[j] = []
+        for i in range(m):
+            value = entries[i, j]
+            if value == 0.0:
+                continue  # a constant zero stays zero when the column is zeroed
+            lines.append(f"    J{i}_{j} = {value if isinstance(value, str) else repr(value)}")
+            entries[i, j] = f"J{i}_{j}"
+            held_columns[j].append(f"J{i}_{j}")
+    for j in clipped:
+        if not held_columns[j]:
+            continue  # the joint does not move the task at all
+        gradient = _sum([_product(entries[i, j], f"b{i}") for i in range(m)])
+        column = " = ".join(held_columns[j])
+        conditions = []
+        if not math.isinf(lower[j]):
+            conditions.append(f"(q{j} <= {float(lower[j])!r} and {gradient} < 0.0)")
+        if not math.isinf(upper[j]):
+            conditions.append(f"(q{j} >= {float(upper[j])!r} and {gradient} > 0.0)")
+        lines.append(f"    if {' or '.join(conditions)}:")
+        lines.append(f"        {column} = 0.0")
+    body, qdot = damped_solve_lines(entries, m, n)
+    lines += [line.replace("return None", "return 2, q, O, P") for line in body]
+    for j in range(n):
+        lines.append(f"    N{j} = q{j} + step * ({qdot[j]})")
+        low, high = float(lower[j]), float(upper[j])
+        if math.isinf(low) and math.isinf(high):
+            continue
+        if wraps[j]:
+            lines.append(f"    if N{j} < {low!r}:")
+            lines.append(f"        N{j} += TWO_PI * ceil(({low!r} - N{j}) / TWO_PI)")
+            lines.append(f"    elif N{j} > {high!r}:")
+            lines.append(f"        N{j} -= TWO_PI * ceil((N{j} - {high!r}) / TWO_PI)")
+        else:
+            if not math.isinf(low):
+                lines.append(f"    if N{j} < {low!r}:")
+                lines.append(f"        N{j} = {low!r}")
+            if not math.isinf(high):
+                lines.append(f"    if N{j} > {high!r}:")
+                lines.append(f"        N{j} = {high!r}")
+    lines.append(f"    return 0, [{', '.join(f'N{j}' for j in range(n))}], O, P")
+    return "\n".join(lines) + "\n"
+
+
+def compile_ik_iteration(
+    chain: Callable,
+    dof: int,
+    rows: Sequence[int],
+    lower: Sequence[float],
+    upper: Sequence[float],
+    wraps: Sequence[bool],
+) -> Callable | None:
+    """Compile :func:`ik_iteration_source`; None when the chain cannot be fused."""
+    if not isinstance(getattr(chain, "source", None), str):
+        return None
+    try:
+        source = ik_iteration_source(chain, dof, rows, lower, upper, wraps)
+    except ValueError:
+        return None
+    namespace: dict = {
+        **_GENERATED_MATH,
+        "ceil": math.ceil,
+        "TWO_PI": 2.0 * math.pi,
+    }
+    exec(compile(source, "<manip_kin ik iteration>", "exec"), namespace)  # noqa: S102 - our own source
+    function = namespace["iterate"]
+    function.source = source
+    return function
