@@ -250,7 +250,7 @@ def singular_versus_regular(setup: Setup, step, cases: list, rounds: int) -> dic
         sums = dict.fromkeys(times, 0)
         for start in range(0, max(len(kinds["regular"]), len(kinds["singular"])), 100):
             for kind, chosen in kinds.items():
-                chunk = chosen[start % len(chosen) : start % len(chosen) + 100]
+                chunk = [chosen[(start + i) % len(chosen)] for i in range(100)]  # 100 calls each
                 begin = clock()
                 for case in chunk:
                     step(case)
