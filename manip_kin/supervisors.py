@@ -239,10 +239,12 @@ class ControllerSupervisor:
         else:
             self._classify_limits(output.limited_joints, "moving towards the goal")
 
-    def joint_step_done(self, output: JointStepOutput) -> None:
-        """Classify a joint tracking step: converged when the reference rests and every joint is within tolerance."""
+    def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool) -> None:
+        """Classify a joint tracking step: converged when the reference rests (or its velocity
+        is no longer used) and every joint is within tolerance of it."""
         error = float(np.max(np.abs(output.joint_error))) if len(output.joint_error) else 0.0
-        if not self._reference_moving and error <= self.config.joint_tolerance:
+        reference_moving = feed_forward_used and self._reference_moving
+        if not reference_moving and error <= self.config.joint_tolerance:
             self._set(ControllerState.CONVERGED, "joint reference reached within tolerance")
         else:
             self._classify_limits(output.limited_joints, "following the joint reference")

@@ -185,14 +185,16 @@ def test_joint_reference_convergence_and_latest_goal_wins():
     supervisor.joint_state_received(0)
     supervisor.goal_received(0, GoalKind.JOINT, moving=True)
     assert supervisor.gate(0) and supervisor.goal_kind is GoalKind.JOINT
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()))
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), True)
     assert supervisor.state is ControllerState.TRACKING  # the reference still moves
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), False)
+    assert supervisor.state is ControllerState.CONVERGED  # its velocity is stale: it rests
     supervisor.goal_received(1 * MS, GoalKind.JOINT, moving=False)
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -2e-3, 0.0]), limited_joints=()))
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -2e-3, 0.0]), limited_joints=()), True)
     assert supervisor.state is ControllerState.TRACKING
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -9e-4, 5e-4]), limited_joints=()))
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -9e-4, 5e-4]), limited_joints=()), True)
     assert supervisor.state is ControllerState.CONVERGED
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, 0.1, 0.0]), limited_joints=(1,)))
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, 0.1, 0.0]), limited_joints=(1,)), True)
     assert supervisor.state is ControllerState.JOINT_LIMITED and supervisor.detail.endswith("j2")
     supervisor.goal_received(2 * MS, GoalKind.POSE, moving=True)  # a pose ignores "moving"
     assert supervisor.goal_kind is GoalKind.POSE
