@@ -215,6 +215,11 @@ class ControllerSupervisor:
         """True while the newest twist is young enough to be used as feed-forward."""
         return self._twist_time_ns is not None and now_ns - self._twist_time_ns <= self._twist_timeout_ns
 
+    def goal_fresh(self, now_ns: int) -> bool:
+        """True while the newest goal is younger than the twist timeout: a joint reference's
+        velocity is used as feed-forward only then (a stalled stream must not carry the arm on)."""
+        return now_ns - self._goal_time_ns <= self._twist_timeout_ns
+
     def step_failed(self, error: Exception) -> None:
         """The control step raised: zeros go out."""
         self._set(ControllerState.STALE_INPUT, f"control step failed: {error}")
@@ -324,15 +329,19 @@ class GeneratorSupervisor:
         self.rejected_targets = 0
         self.rejected_stamp = ""
         self.last_rejection = ""
+        self.rejection_kind = ""
         self._start_ns = 0
 
-    def reject(self, reason: str, stamp: str) -> str:
+    def reject(self, reason: str, stamp: str, kind: str = "invalid") -> str:
         """A target was rejected; returns what happens to the running motion (for the log line).
 
-        A rejection neither stops a running motion nor replaces its ``target_stamp``.
+        ``kind`` is ``invalid`` (the message or the pipeline's state is unusable) or
+        ``unreachable`` (a valid target the arm cannot follow). A rejection neither stops a
+        running motion nor replaces its ``target_stamp``.
         """
         self.rejected_targets += 1
         self.last_rejection = reason
+        self.rejection_kind = kind
         self.rejected_stamp = stamp
         if self.state is GeneratorState.STREAMING:
             return f"the running {self.motion_kind} goes on"

@@ -30,9 +30,10 @@ import numpy as np
 
 from manip_kin.damped_least_squares import damped_least_squares
 from manip_kin.errors import InvalidArgumentError, check_finite
-from manip_kin.kinematics import KinematicsData, forward_kinematics, geometric_jacobian_from_data
+from manip_kin.kinematics import KinematicsData, forward_kinematics, frame_in_base, geometric_jacobian_from_data
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation, matrix_to_rotvec, rotvec_to_matrix
+from manip_kin.tasks import FULL_TASK, Task, parse_task
 
 TIME_SCALINGS = ("trapezoidal", "cubic", "quintic", "constant")
 
@@ -329,6 +330,7 @@ def check_line_reachable(
     orientation_tolerance: float = 1e-3,
     iterations: int = 30,
     damping: float = 1e-3,
+    task: Task | str | None = FULL_TASK,
 ) -> ReachReport:
     """Follow the line with a joint-limited damped least-squares IK, from ``q_start`` on.
 
@@ -350,6 +352,8 @@ def check_line_reachable(
         orientation_tolerance: reached when the orientation error is below this [rad].
         iterations: Newton steps per sample at most.
         damping: λ of the damped least squares [-].
+        task: the pose components that must be reached (see :mod:`manip_kin.tasks`; None = the
+            model's default task); the others are free, e.g. the orientation of a position-only line.
 
     Returns:
         A :class:`ReachReport`.
@@ -360,6 +364,8 @@ def check_line_reachable(
     count = max(2, int(math.ceil(max(line.length / max_step, line.angle / max_angle_step))) + 1)
     count = min(count, 2000)
     lower, upper = model.lower, model.upper
+    task_of = parse_task(task, model)
+    rows = list(task_of.rows)
     last_reached = 0.0
     for s in np.linspace(0.0, 1.0, count):
         target = line.pose_at(float(s))
@@ -368,27 +374,43 @@ def check_line_reachable(
             forward_kinematics(model, data, q)
             current = data.tool if frame_index == model.dof + 2 else (data.ee if frame_index == model.dof + 1 else None)
             if current is None:
-                from manip_kin.kinematics import frame_in_base
-
                 current = frame_in_base(model, data, frame_index)
             error = np.concatenate(
                 [matrix_to_rotvec(target[:3, :3] @ current[:3, :3].T), target[:3, 3] - current[:3, 3]]
             )
-            orientation_error = float(np.linalg.norm(error[:3]))
-            position_error = float(np.linalg.norm(error[3:]))
+            orientation_error, position_error = task_of.error_norms(error[:3], error[3:])
             if position_error < position_tolerance and orientation_error < orientation_tolerance:
                 break
             jac = geometric_jacobian_from_data(model, data, frame_index, current[:3, 3])
-            q = _limited_dls_step(jac, error, q, lower, upper, damping)
+            q = _limited_dls_step(jac[rows], error[rows], q, lower, upper, damping)
         if not (position_error < position_tolerance and orientation_error < orientation_tolerance):
             reason = (
                 f"line leaves the arm's reach at {100.0 * s:.0f}% of the way "
                 f"(at {np.round(target[:3, 3], 4).tolist()} m): residual {position_error:.4g} m, "
-                f"{orientation_error:.4g} rad within the joint limits"
+                f"{orientation_error:.4g} rad within the joint limits (task {task_of.name}); "
+                f"{_why_stuck(model, data, frame_index, q, rows)}"
             )
             return ReachReport(False, last_reached, position_error, orientation_error, q, reason)
         last_reached = float(s)
     return ReachReport(True, 1.0, 0.0, 0.0, q)
+
+
+def _why_stuck(model: RobotModel, data: KinematicsData, frame_index: int, q: np.ndarray, rows: list[int]) -> str:
+    """Why the continuation stopped at ``q``: joints at their limits, or a singular arm."""
+    at_limit = [
+        name
+        for name, value, low, high in zip(model.joint_names, q, model.lower, model.upper)
+        if value <= low + 1e-6 or value >= high - 1e-6
+    ]
+    if at_limit:
+        return f"joints at a position limit there: {', '.join(at_limit)}"
+    forward_kinematics(model, data, q)
+    origin = frame_in_base(model, data, frame_index)[:3, 3]
+    jac = geometric_jacobian_from_data(model, data, frame_index, origin)[rows]
+    sigma_min = float(np.linalg.svd(jac, compute_uv=False)[-1]) if jac.shape[0] <= jac.shape[1] else 0.0
+    if sigma_min < 1e-2:
+        return f"the arm is at a singularity there (smallest singular value {sigma_min:.2g}): outside its workspace"
+    return "no configuration within the joint limits continues the line from the arm's current branch"
 
 
 def _limited_dls_step(jac, error, q, lower, upper, damping) -> np.ndarray:

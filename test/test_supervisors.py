@@ -248,10 +248,12 @@ def test_generator_rejects_when_idle_and_keeps_a_running_motion():
     assert supervisor.state is GeneratorState.REJECTED and supervisor.level == "warn"
     assert not supervisor.start(_Motion(2.0), "line", 1000 * MS, "2.000000000", "a line")
     assert supervisor.state is GeneratorState.STREAMING and supervisor.target_stamp == "2.000000000"
-    kept = supervisor.reject("leaves the arm's reach", "3.000000000")
+    assert supervisor.rejection_kind == "invalid"
+    kept = supervisor.reject("leaves the arm's reach", "3.000000000", "unreachable")
     assert kept == "the running line goes on" and supervisor.state is GeneratorState.STREAMING
     assert supervisor.target_stamp == "2.000000000" and supervisor.rejected_stamp == "3.000000000"
     assert supervisor.rejected_targets == 2 and supervisor.last_rejection == "leaves the arm's reach"
+    assert supervisor.rejection_kind == "unreachable"
 
 
 def test_generator_streams_finishes_and_is_preempted():

@@ -6,9 +6,13 @@ delivered when the command returns. ``--wait`` then follows ``/diagnostics`` unt
 controller reports the goal converged (for ``line``: until the generator finished the line
 and the controller converged on its final pose) and prints the final errors.
 
+With ``--xyz`` alone (no ``--rpy``/``--quat``) the target is position-only: the message
+carries the current tool orientation (from ``tool_pose``), which a controller and generator
+with ``task:=position`` leave free.
+
 Exit codes: 0 delivered (and converged with ``--wait``); 1 ``--wait`` timed out before
-convergence (the final errors are printed); 2 bad input, no subscriber within
-``--timeout``, or a line the generator rejected.
+convergence (the final errors are printed), or a line that leaves the arm's reach; 2 bad
+input, no subscriber within ``--timeout``, or a line target the generator rejected as invalid.
 """
 
 from __future__ import annotations
@@ -34,7 +38,8 @@ def register(subparsers) -> None:
         "goal",
         help="publish one goal pose on goal_pose for cartesian_controller (optionally wait until reached)",
         description="Publish one goal pose of the controlled frame (tool if any, else end effector) in the "
-        "base frame on goal_pose (in --namespace), and exit once the controller has it. Example: "
+        "base frame on goal_pose (in --namespace), and exit once the controller has it. With --xyz alone the "
+        "goal is position-only (it carries the current tool orientation). Example: "
         "manip_kin goal --xyz 0.2 -0.7 0.3 --rpy 0 1.57 0 --wait --namespace /left",
     )
     _add_common(goal)
@@ -44,7 +49,9 @@ def register(subparsers) -> None:
         help="publish one line target on line_target for trajectory_generator (optionally wait until done)",
         description="Publish the end pose of a straight line on line_target (in --namespace); "
         "trajectory_generator plans the "
-        "line from the current tool pose and streams it to the controller. Example: "
+        "line from the current tool pose and streams it to the controller. With --xyz alone the target is "
+        "position-only (it carries the current tool orientation). A line that leaves the arm's reach is refused "
+        "with where and why (exit 1). Example: "
         "manip_kin line --xyz -0.4 0.3 0.5 --rpy 0 1.5708 0 --wait",
     )
     _add_common(line)
@@ -109,7 +116,13 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     from manip_kin.pipeline import PipelineError
 
     pose = pose_from_args(args)
+    position_only = args.rpy is None and args.quat is None
     try:
+        if position_only:
+            from geometry_msgs.msg import PoseStamped
+
+            client.wait_subscribers(PoseStamped, topic, args.timeout)  # "nobody listens" before "no tool pose"
+            pose[:3, :3] = client.current_tool_pose(args.timeout)[:3, :3]
         if args.wait:
             # A status from each node proves /diagnostics is matched before the pose goes out.
             for node in ready_nodes:
@@ -120,7 +133,13 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
         print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
         return 2
     topic = client.topic(topic)
-    payload = {"topic": topic, "stamp": stamp, "xyz": pose[:3, 3].tolist(), "frame": args.frame}
+    payload = {
+        "topic": topic,
+        "stamp": stamp,
+        "xyz": pose[:3, 3].tolist(),
+        "frame": args.frame,
+        "position_only": position_only,
+    }
     if not args.wait:
         _report(args, payload, f"{label} {pose[:3, 3].round(4).tolist()} delivered on {topic} (stamp {stamp})")
         return 0
@@ -185,7 +204,8 @@ def run_line(args: argparse.Namespace) -> int:
             print(
                 f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr
             )
-            return 2
+            # A valid line the arm cannot follow is "not achieved" (1); a malformed one is bad input (2).
+            return 1 if generator.values.get("rejection_kind") == "unreachable" else 2
         payload["line_duration"] = generator.number("duration")
         remaining = max(args.timeout - (time.monotonic() - start), 0.1)
         return _await_convergence(

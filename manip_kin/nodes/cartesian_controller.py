@@ -1,8 +1,12 @@
-"""``cartesian_controller``: goal pose (+ feed-forward twist) to joint-rate commands.
+"""``cartesian_controller``: goal pose (+ feed-forward twist) or joint reference to joint-rate commands.
 
-The node holds one :class:`~manip_kin.control.CartesianController`; every cycle of its
-:class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state, goal pose
-and goal twist, runs one control step and publishes ``joint_velocity_commands``.
+The node holds one :class:`~manip_kin.control.CartesianController` and one
+:class:`~manip_kin.supervisors.ControllerSupervisor`; every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state, goal pose,
+goal twist and joint reference, runs one control step and publishes
+``joint_velocity_commands``. The latest goal of either kind wins: a pose goal runs the
+cartesian law, a joint reference (``joint_reference``, a ``JointState`` with positions and
+velocities) the joint tracking law of :mod:`manip_kin.joint_control`.
 ``/diagnostics`` carries the state (see :data:`STATES`), the errors and the loop timing,
 at ``diagnostics_rate_hz`` and at once when the state changes.
 """
@@ -20,145 +24,16 @@ from std_msgs.msg import Float64MultiArray
 from manip_kin.bounds import InputBounds
 from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.errors import ManipKinError
+from manip_kin.joint_control import JointTrackingOutput, joint_tracking_step
+from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
+from manip_kin.nodes.joint_messages import JointReferenceReader
+from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
-from manip_kin.nodes.robot_model import load_node_model, model_parameters
+from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
 from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
-
-NODE_NAME = "cartesian_controller"
-
-#: Controller states reported as the DiagnosticStatus message and the ``state`` value.
-STATES = tuple(state.value for state in ControllerState)
-
-PARAMETERS = (
-    *model_parameters(""),
-    ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
-    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0, tunable=True),
-    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0, tunable=True),
-    ParamSpec(
-        "frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"
-    ),
-    ParamSpec(
-        "task",
-        "str",
-        "",
-        "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)",
-    ),
-    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0, tunable=True),
-    ParamSpec(
-        "singular_threshold",
-        "float",
-        0.02,
-        "smallest singular value below which damping rises",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits", tunable=True),
-    ParamSpec(
-        "respect_position_limits",
-        "bool",
-        True,
-        "redistribute the task over joints not at a position limit",
-        tunable=True,
-    ),
-    ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
-    ParamSpec(
-        "joint_state_timeout",
-        "float",
-        0.1,
-        "no joint state for longer than this: publish zeros",
-        "s",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "goal_timeout",
-        "float",
-        0.0,
-        "a goal older than this is dropped and zeros published (0 = goals never expire)",
-        "s",
-        minimum=0.0,
-        tunable=True,
-    ),
-    ParamSpec(
-        "goal_twist_timeout",
-        "float",
-        0.02,
-        "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)",
-        "s",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "position_tolerance",
-        "float",
-        1e-4,
-        "converged when the position error is below this",
-        "m",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "orientation_tolerance",
-        "float",
-        1e-3,
-        "... and the orientation error below this",
-        "rad",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "quaternion_tolerance",
-        "float",
-        1e-2,
-        "a goal quaternion whose length differs from 1 by more is rejected",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "diagnostics_rate_hz",
-        "float",
-        10.0,
-        "rate of /diagnostics (also sent at once on a state change)",
-        "Hz",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "realtime_priority",
-        "int",
-        0,
-        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
-        minimum=0,
-    ),
-)
-
-USAGE = usage_text(
-    NODE_NAME,
-    "Resolved-rate cartesian controller: drives the controlled frame (tool if any, else end\n"
-    "effector) to the latest goal_pose with joint-rate commands at rate_hz, adding the\n"
-    "goal_twist feed-forward while it is fresh. A goal with a non-finite value, a quaternion far\n"
-    "from unit length or a frame other than the base frame is rejected (previous goal kept).\n"
-    "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
-    f"States on /diagnostics: {', '.join(STATES)}.",
-    PARAMETERS,
-    subscribes=[
-        ("goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
-        ("goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
-        ("joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
-    ],
-    publishes=[
-        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
-        (
-            "/diagnostics",
-            "diagnostic_msgs/DiagnosticArray",
-            "state, errors [m, rad], manipulability, damping, limits, loop timing",
-        ),
-    ],
-    example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000 -p gain_linear:=1.5",
-)
 
 
 class CartesianControllerNode(LoopingNode):
@@ -185,6 +60,8 @@ class CartesianControllerNode(LoopingNode):
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
         self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
         self._twist_sub = PolledSubscription(self, TwistStamped, "goal_twist", 10)
+        self._reference_sub = PolledSubscription(self, JointState, "joint_reference", 10)
+        self._references = JointReferenceReader(self.model)
         self._command_pub = self.create_publisher(Float64MultiArray, "joint_velocity_commands", 10)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
@@ -198,8 +75,11 @@ class CartesianControllerNode(LoopingNode):
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
+        self.reference: tuple[np.ndarray, np.ndarray] | None = None
         self.output: ControlOutput | None = None
+        self.joint_output: JointTrackingOutput | None = None
         self.rejected_goals = 0
+        self.rejected_references = 0
         self.rejected_twists = 0
         self.rejected_joint_states = 0
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
@@ -253,6 +133,8 @@ class CartesianControllerNode(LoopingNode):
         self.position_tolerance = params["position_tolerance"]
         self.orientation_tolerance = params["orientation_tolerance"]
         self._quaternion_tolerance = params["quaternion_tolerance"]
+        self.gain_joint = params["gain_joint"]
+        self.joint_tolerance = params["joint_tolerance"]
         self._diagnostics_period_ns = diagnostics_period_ns
 
     @staticmethod
@@ -263,6 +145,7 @@ class CartesianControllerNode(LoopingNode):
             goal_twist_timeout=params["goal_twist_timeout"],
             position_tolerance=params["position_tolerance"],
             orientation_tolerance=params["orientation_tolerance"],
+            joint_tolerance=params["joint_tolerance"],
             task=controller.task,
         )
 
@@ -290,6 +173,7 @@ class CartesianControllerNode(LoopingNode):
                     "joint_state:" + conv.problem_kind(str(error)),
                     f"rejected {self._joint_state_sub.subscription.topic_name}: {error}",
                 )
+        pose_stamp = reference_stamp = None
         while (msg := self._goal_sub.take()) is not None:
             problem = conv.pose_problem(
                 msg, self.base_frame, "goal pose", self._quaternion_tolerance, self.bounds.max_target_distance
@@ -302,8 +186,7 @@ class CartesianControllerNode(LoopingNode):
                 )
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
-            self.goal_stamp = conv.stamp_key(msg.header.stamp)
-            self.supervisor.goal_received(now_ns, GoalKind.POSE)
+            pose_stamp = msg.header.stamp
             self._goal_arrival_ns = now_ns
         while (msg := self._twist_sub.take()) is not None:
             problem = conv.twist_problem(
@@ -319,6 +202,26 @@ class CartesianControllerNode(LoopingNode):
             angular, linear = conv.twist_to_arrays(msg.twist)
             self._twist = (angular, linear)
             self.supervisor.twist_received(now_ns, bool(angular.any() or linear.any()))
+        while (msg := self._reference_sub.take()) is not None:
+            try:
+                self.reference = self._references.read(msg)
+            except conv.InvalidMessageError as error:
+                self.rejected_references += 1
+                self._warn(
+                    "reference:" + conv.problem_kind(str(error)),
+                    f"rejected {self._reference_sub.subscription.topic_name}: {error}; keeping the previous goal",
+                )
+                continue
+            reference_stamp = msg.header.stamp
+        # The latest goal of either kind wins; when both came in one cycle, the later stamp.
+        if pose_stamp is not None and (
+            reference_stamp is None or conv.stamp_to_ns(pose_stamp) > conv.stamp_to_ns(reference_stamp)
+        ):
+            self.goal_stamp = conv.stamp_key(pose_stamp)
+            self.supervisor.goal_received(now_ns, GoalKind.POSE)
+        elif reference_stamp is not None:
+            self.goal_stamp = conv.stamp_key(reference_stamp)
+            self.supervisor.goal_received(now_ns, GoalKind.JOINT, bool(self.reference[1].any()))
 
     # --- the cycle -------------------------------------------------------------------------------
 
@@ -331,16 +234,19 @@ class CartesianControllerNode(LoopingNode):
         supervisor = self.supervisor
         qdot = self._zeros
         if supervisor.gate(now_ns):
-            twist_fresh = supervisor.feed_forward_fresh(now_ns)
             try:
-                output = self.controller.step(self.q, self.goal, self._twist if twist_fresh else None, self.dt)
+                if supervisor.goal_kind is GoalKind.JOINT:
+                    qdot = self._joint_step(now_ns)
+                else:
+                    twist_fresh = supervisor.feed_forward_fresh(now_ns)
+                    output = self.controller.step(self.q, self.goal, self._twist if twist_fresh else None, self.dt)
+                    self.output = output
+                    qdot = output.qdot
+                    supervisor.pose_step_done(output, twist_fresh)
             except ManipKinError as error:
+                qdot = self._zeros
                 supervisor.step_failed(error)
                 self._warn("step", f"control step failed, publishing zeros: {error}")
-            else:
-                self.output = output
-                qdot = output.qdot
-                supervisor.pose_step_done(output, twist_fresh)
         self._command_pub.publish(self._command_cdr.encode(qdot))
         if self.waiter is not None:
             # Wake on a goal after a quiet spell (a new goal: react at once); not while goals
@@ -349,30 +255,87 @@ class CartesianControllerNode(LoopingNode):
         if supervisor.report_due(now_ns):
             self._publish_diagnostics(now_ns)
 
+    def _joint_step(self, now_ns: int) -> np.ndarray:
+        """One step of the joint tracking law; the reference velocity is used while it is fresh
+        (as the goal twist: a stalled stream must not carry the arm on)."""
+        q_reference, qdot_reference = self.reference
+        fresh = self.supervisor.goal_fresh(now_ns)
+        output = joint_tracking_step(
+            self.model,
+            self.q,
+            q_reference,
+            qdot_reference if fresh else None,
+            self.gain_joint,
+            self.dt,
+            self.controller.config.respect_position_limits,
+            self.controller.config.respect_velocity_limits,
+        )
+        self.joint_output = output
+        self.supervisor.joint_step_done(output, fresh)
+        return output.qdot
+
     def _publish_diagnostics(self, now_ns: int) -> None:
+        supervisor = self.supervisor
+        if supervisor.goal_kind is GoalKind.JOINT:
+            values = self._joint_values(supervisor.active and self.joint_output is not None)
+        else:
+            values = self._pose_values(supervisor.active and self.output is not None)
+        values += [
+            ("goal_kind", supervisor.goal_kind or ""),
+            ("task", self.controller.task.name),
+            ("position_tolerance", f"{self.position_tolerance:g}"),
+            ("orientation_tolerance", f"{self.orientation_tolerance:g}"),
+            ("joint_tolerance", f"{self.joint_tolerance:g}"),
+            ("rejected_goals", str(self.rejected_goals)),
+            ("rejected_twists", str(self.rejected_twists)),
+            ("rejected_joint_states", str(self.rejected_joint_states)),
+            ("rejected_references", str(self.rejected_references)),
+            ("loop_error", self.loop_error()),
+        ] + stats_key_values(self.loop.stats())
+        level = self.diagnostic_level(self.supervisor.level)
+        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
+        self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+
+    def _pose_values(self, active: bool) -> list[tuple[str, str]]:
         output = self.output
-        active = self.supervisor.active and output is not None
-        values = [
+        return [
             ("state", self.state),
             ("detail", self.detail),
             ("goal_stamp", self.goal_stamp),
             ("goal_xyz", " ".join(f"{v:.6f}" for v in self.goal[:3, 3]) if self.goal is not None else ""),
             ("position_error", f"{output.position_error_norm:.9f}" if active else ""),
             ("orientation_error", f"{output.orientation_error_norm:.9f}" if active else ""),
+            ("joint_error", ""),
             ("manipulability", f"{output.manipulability:.6g}" if active else ""),
             ("damping", f"{output.damping:.6g}" if active else ""),
             ("velocity_scale", f"{output.velocity_scale:.4f}" if active else ""),
             ("limited_joints", ",".join(self.model.joint_names[i] for i in output.limited_joints) if active else ""),
-            ("position_tolerance", f"{self.position_tolerance:g}"),
-            ("orientation_tolerance", f"{self.orientation_tolerance:g}"),
-            ("rejected_goals", str(self.rejected_goals)),
-            ("rejected_twists", str(self.rejected_twists)),
-            ("rejected_joint_states", str(self.rejected_joint_states)),
-            ("loop_error", self.loop_error()),
-        ] + stats_key_values(self.loop.stats())
-        level = self.diagnostic_level(self.supervisor.level)
-        status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
-        self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+        ]
+
+    def _joint_values(self, active: bool) -> list[tuple[str, str]]:
+        """Status values while following a joint reference; the pose errors are those of the
+        controlled frame w.r.t. where the reference puts it (at the diagnostics rate only)."""
+        output = self.joint_output
+        goal = frame_pose(self.model, self.reference[0], self.controller.frame_index)
+        position_error = orientation_error = ""
+        if active:
+            orientation, position = self.controller.error(self.q, goal)
+            position_error = f"{np.linalg.norm(position):.9f}"
+            orientation_error = f"{np.linalg.norm(orientation):.9f}"
+        return [
+            ("state", self.state),
+            ("detail", self.detail),
+            ("goal_stamp", self.goal_stamp),
+            ("goal_xyz", " ".join(f"{v:.6f}" for v in goal[:3, 3])),
+            ("goal_q", " ".join(f"{v:.6f}" for v in self.reference[0])),
+            ("position_error", position_error),
+            ("orientation_error", orientation_error),
+            ("joint_error", f"{np.max(np.abs(output.joint_error)):.9f}" if active else ""),
+            ("manipulability", ""),
+            ("damping", ""),
+            ("velocity_scale", f"{output.velocity_scale:.4f}" if active else ""),
+            ("limited_joints", ",".join(self.model.joint_names[i] for i in output.limited_joints) if active else ""),
+        ]
 
 
 def main(argv=None) -> int:

@@ -13,6 +13,8 @@ PIPELINE_TOPIC_TYPES = {
     "goal_pose": "geometry_msgs/msg/PoseStamped",
     "goal_twist": "geometry_msgs/msg/TwistStamped",
     "line_target": "geometry_msgs/msg/PoseStamped",
+    "joint_trajectory": "trajectory_msgs/msg/JointTrajectory",
+    "joint_reference": "sensor_msgs/msg/JointState",
     "planned_path": "nav_msgs/msg/Path",
     "ee_pose": "geometry_msgs/msg/PoseStamped",
     "tool_pose": "geometry_msgs/msg/PoseStamped",

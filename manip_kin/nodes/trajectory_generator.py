@@ -1,4 +1,4 @@
-"""``trajectory_generator``: streams a straight-line goal from the current tool pose to a target.
+"""``trajectory_generator``: streams a straight line to a pose target, or a joint-space trajectory.
 
 On each valid ``line_target`` the node plans a :class:`~manip_kin.trajectory.LineTrajectory`
 from the newest ``tool_pose``, checks the arm can follow it
@@ -9,6 +9,14 @@ publishes it on ``planned_path`` and then, every cycle of its
 twist and stops streaming: the controller holds its last goal, and a goal sent later by
 hand (``manip_kin goal``) is not overwritten. A new target pre-empts a running line, from
 the current tool pose; a rejected target leaves a running line alone.
+
+On a ``joint_trajectory`` (``trajectory_msgs/JointTrajectory``, as ros2_control's
+JointTrajectoryController takes it) it plans a
+:class:`~manip_kin.joint_trajectory.JointTrajectoryPlan` from the newest ``joint_states``
+and streams ``joint_reference`` (``sensor_msgs/JointState``: positions and velocities by
+joint name) the same way, ending with the last point at rest. The latest goal of either
+kind wins. The ``task`` (as the controller's) decides what a line must reach: a
+position-only task keeps the start orientation and checks the position only.
 """
 
 from __future__ import annotations
@@ -22,126 +30,22 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Path
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
 
 from manip_kin.bounds import UNBOUNDED, InputBounds
 from manip_kin.errors import InvalidArgumentError, ManipKinError
+from manip_kin.joint_trajectory import JointTrajectoryPlan, plan_joint_trajectory
+from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.joint_messages import trajectory_points
+from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
-from manip_kin.nodes.robot_model import load_node_model, model_parameters
+from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.trajectory_generator_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
 from manip_kin.supervisors import GeneratorState, GeneratorSupervisor
-from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, check_line_reachable
-
-NODE_NAME = "trajectory_generator"
-
-#: States reported on /diagnostics.
-STATES = tuple(state.value for state in GeneratorState)
-
-PARAMETERS = (
-    *model_parameters(""),
-    ParamSpec("rate_hz", "float", 500.0, "rate of goal_pose and goal_twist while a line runs", "Hz", positive=True),
-    ParamSpec(
-        "time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS, tunable=True
-    ),
-    ParamSpec(
-        "max_linear_velocity",
-        "float",
-        0.25,
-        "speed limit of the position (the constant speed of 'constant')",
-        "m/s",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "max_linear_acceleration",
-        "float",
-        0.5,
-        "acceleration limit of the position (not used by 'constant')",
-        "m/s^2",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "max_angular_velocity",
-        "float",
-        0.5,
-        "angular speed limit of the orientation",
-        "rad/s",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "max_angular_acceleration",
-        "float",
-        1.0,
-        "angular acceleration limit (not used by 'constant')",
-        "rad/s^2",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits", tunable=True),
-    ParamSpec(
-        "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
-    ),
-    ParamSpec(
-        "tool_pose_timeout",
-        "float",
-        0.5,
-        "a target is rejected when tool_pose is older than this",
-        "s",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "quaternion_tolerance",
-        "float",
-        1e-2,
-        "a target quaternion whose length differs from 1 by more is rejected",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True, tunable=True),
-    ParamSpec(
-        "diagnostics_rate_hz",
-        "float",
-        5.0,
-        "rate of /diagnostics (also sent at once on a state change)",
-        "Hz",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "realtime_priority",
-        "int",
-        0,
-        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
-        minimum=0,
-    ),
-)
-
-USAGE = usage_text(
-    NODE_NAME,
-    "Straight-line goals: on a line_target pose, plans a line from the current tool_pose\n"
-    "(position along the segment, orientation by slerp) timed by time_scaling within the\n"
-    "velocity and acceleration limits, checks the arm can follow it from the current\n"
-    "joint_states, and streams goal_pose and goal_twist at rate_hz until the end, then\n"
-    "publishes the final pose once and holds. A new target pre-empts the running line.\n"
-    "Unreachable or malformed targets are rejected with a log line.",
-    PARAMETERS,
-    subscribes=[
-        ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
-        ("tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
-        ("joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
-    ],
-    publishes=[
-        ("goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
-        ("goal_twist", "geometry_msgs/TwistStamped", "the line's velocity (feed-forward)"),
-        ("planned_path", "nav_msgs/Path", "the planned line, transient local"),
-        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, progress, target and final goal stamps"),
-    ],
-    example=f"{NODE_NAME} --ros-args -p robot:=irb120 -p time_scaling:=constant -p max_linear_velocity:=0.4",
-)
+from manip_kin.tasks import parse_task
+from manip_kin.trajectory import LineTrajectory, MotionLimits, check_line_reachable
 
 
 class TrajectoryGeneratorNode(LoopingNode):
@@ -160,12 +64,14 @@ class TrajectoryGeneratorNode(LoopingNode):
         LiveParameters(self, PARAMETERS, self._set_parameters)
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
+        self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
         # not turning 2 kHz of state messages into Python objects keeps this loop cheap.
         self._tool_pose_sub = PolledSubscription(self, PoseStamped, "tool_pose", 1)
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 1)
         self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", 10)
         self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", 10)
+        self._reference_pub = self.create_publisher(JointState, "joint_reference", 10)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
         )
@@ -177,7 +83,10 @@ class TrajectoryGeneratorNode(LoopingNode):
             self.model.joint_names, self.bounds.position_lower, self.bounds.position_upper
         )
         self._last_goal_pose: np.ndarray | None = None
+        self._last_reference: np.ndarray | None = None
+        self._reference_cdr = conv.JointStateCdr(self.model.joint_names)
 
+        self._start_stamp_ns = 0
         self._tool_pose_msg: PoseStamped | None = None
         self._joint_state_msg: JointState | None = None
         self._warn = ThrottledLog(self.get_logger().warning, 0.5)
@@ -185,7 +94,8 @@ class TrajectoryGeneratorNode(LoopingNode):
 
         self.get_logger().info(
             f"robot {self.model.name}: {self.time_scaling} lines at <= {self.limits.max_linear_velocity:g} m/s, "
-            f"{self.limits.max_angular_velocity:g} rad/s, streamed at {self.rate_hz:g} Hz"
+            f"{self.limits.max_angular_velocity:g} rad/s (task {self.task.name}), {self.joint_time_scaling} "
+            f"joint trajectories, streamed at {self.rate_hz:g} Hz"
         )
         self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], wake_on=(self._target_sub,))
 
@@ -220,7 +130,10 @@ class TrajectoryGeneratorNode(LoopingNode):
         )
         _check_limits(limits, self.bounds)
         self.limits = limits
+        task = parse_task(params["task"] or None, self.model)
         self.time_scaling = params["time_scaling"]
+        self.joint_time_scaling = params["joint_time_scaling"]
+        self.task = task
         self.check_reach = params["check_reach"]
         self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
@@ -239,8 +152,11 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     # --- inputs --------------------------------------------------------------------------------
 
-    def _take_inputs(self, now_ns: int) -> PoseStamped | None:
-        """Drain the targets; return the newest valid one (None when there is none)."""
+    def _take_inputs(self, now_ns: int) -> PoseStamped | JointTrajectory | None:
+        """Drain the goals; return the newest valid one of either kind (None when there is none).
+
+        When a line target and a trajectory come in the same cycle, the later stamp wins.
+        """
         target = None
         while (msg := self._target_sub.take()) is not None:
             problem = conv.pose_problem(
@@ -250,31 +166,69 @@ class TrajectoryGeneratorNode(LoopingNode):
                 self._reject(msg, problem)
                 continue
             target = msg
+        trajectory = None
+        while (msg := self._trajectory_sub.take()) is not None:
+            trajectory = msg  # checked when planned
+        if target is None or (
+            trajectory is not None
+            and conv.stamp_to_ns(trajectory.header.stamp) >= conv.stamp_to_ns(target.header.stamp)
+        ):
+            return trajectory
         return target
 
-    def _reject(self, msg: PoseStamped, reason: str) -> None:
-        kept = self.supervisor.reject(reason, conv.stamp_key(msg.header.stamp))
+    def _reject(self, msg: PoseStamped | JointTrajectory, reason: str, kind: str = "invalid") -> None:
+        kept = self.supervisor.reject(reason, conv.stamp_key(msg.header.stamp), kind)
+        topic = self._trajectory_sub if isinstance(msg, JointTrajectory) else self._target_sub
         self._error(
             "target:" + conv.problem_kind(reason),
-            f"rejected {self._target_sub.subscription.topic_name}: {reason}; {kept}",
+            f"rejected {topic.subscription.topic_name}: {reason}; {kept}",
         )
+
+    def _current_state(self, msg: PoseStamped | JointTrajectory) -> bool:
+        """Take the newest tool pose and joint state; False (and ``msg`` rejected) when the one
+        a plan starts from is missing or older than ``tool_pose_timeout``."""
+        while (state := self._tool_pose_sub.take()) is not None:
+            self._tool_pose_msg = state
+        while (state := self._joint_state_sub.take()) is not None:
+            self._joint_state_msg = state
+        start = self._joint_state_msg if isinstance(msg, JointTrajectory) else self._tool_pose_msg
+        if start is None or (
+            self.get_clock().now().nanoseconds - conv.stamp_to_ns(start.header.stamp) > self._tool_pose_timeout_ns
+        ):
+            subscription = self._joint_state_sub if isinstance(msg, JointTrajectory) else self._tool_pose_sub
+            self._reject(msg, f"no current {subscription.subscription.topic_name} (is robot_state running?)")
+            return False
+        return True
 
     # --- planning ----------------------------------------------------------------------------------
 
+    def _plan_trajectory(self, msg: JointTrajectory, now_ns: int) -> bool:
+        """Plan a joint trajectory from the current joint state; True when it started."""
+        if not self._current_state(msg):
+            return False
+        try:
+            q = self._mapper.positions(self._joint_state_msg)
+            names, points = trajectory_points(msg)
+            plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling)
+        except ManipKinError as error:
+            self._reject(msg, str(error))
+            return False
+        # References are stamped with the time they are for, start + t, on the ROS clock: the
+        # loop's start time (monotonic) moved to that clock.
+        self._start_stamp_ns = now_ns + self.get_clock().now().nanoseconds - time.monotonic_ns()
+        detail = f"joint trajectory of {plan.point_count} point(s) in {plan.duration:.3f} s"
+        preempted = self.supervisor.start(plan, "joint trajectory", now_ns, conv.stamp_key(msg.header.stamp), detail)
+        self.get_logger().info(
+            f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.joint_time_scaling} "
+            f"{detail} from {np.round(q, 4).tolist()} to {np.round(plan.goal, 4).tolist()}"
+        )
+        times = np.linspace(0.0, plan.duration, self._path_points)
+        self._publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
+        return True
+
     def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
         """Plan a line to ``target_msg``; True when it replaced the running line."""
-        while (msg := self._tool_pose_sub.take()) is not None:
-            self._tool_pose_msg = msg
-        while (msg := self._joint_state_sub.take()) is not None:
-            self._joint_state_msg = msg
-        clock_ns = self.get_clock().now().nanoseconds
-        if (
-            self._tool_pose_msg is None
-            or clock_ns - conv.stamp_to_ns(self._tool_pose_msg.header.stamp) > self._tool_pose_timeout_ns
-        ):
-            self._reject(
-                target_msg, f"no current {self._tool_pose_sub.subscription.topic_name} (is robot_state running?)"
-            )
+        if not self._current_state(target_msg):
             return False
         tool_problem = conv.pose_problem(
             self._tool_pose_msg,
@@ -288,6 +242,8 @@ class TrajectoryGeneratorNode(LoopingNode):
             return False
         start = conv.pose_stamped_to_matrix(self._tool_pose_msg)
         goal = conv.pose_stamped_to_matrix(target_msg)
+        if not self.task.orientation_rows:
+            goal[:3, :3] = start[:3, :3]  # orientation free: keep it, and do not time the line by a turn
         try:
             line = LineTrajectory.plan(start, goal, self.time_scaling, self.limits)
             if self.check_reach:
@@ -298,9 +254,9 @@ class TrajectoryGeneratorNode(LoopingNode):
                     )
                     return False
                 q = self._mapper.positions(self._joint_state_msg)
-                report = check_line_reachable(self.model, line, q)
+                report = check_line_reachable(self.model, line, q, task=self.task)
                 if not report.reachable:
-                    self._reject(target_msg, report.reason)
+                    self._reject(target_msg, report.reason, "unreachable")
                     return False
         except ManipKinError as error:
             self._reject(target_msg, str(error))
@@ -315,26 +271,29 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.time_scaling} line "
             f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {detail}"
         )
-        self._publish_path(line)
+        self._publish_path(line.sample_path(self._path_points))
         return True
 
-    def _publish_path(self, line: LineTrajectory) -> None:
+    def _publish_path(self, poses) -> None:
         path = Path()
         stamp = self.get_clock().now().to_msg()
         path.header.stamp = stamp
         path.header.frame_id = self.base_frame
-        path.poses = [
-            conv.make_pose_stamped(pose, self.base_frame, stamp) for pose in line.sample_path(self._path_points)
-        ]
+        path.poses = [conv.make_pose_stamped(pose, self.base_frame, stamp) for pose in poses]
         self._path_pub.publish(path)
 
     # --- the cycle -------------------------------------------------------------------------------
 
     def publish_safe_output(self) -> None:
-        """After a failed cycle: stop streaming and hold the last goal (sent again, at zero twist)."""
+        """After a failed cycle: stop streaming and hold the last goal (sent again, at rest)."""
         if not self.supervisor.stop("stopped streaming after a cycle error; holding the last goal"):
             return
-        if self._last_goal_pose is not None:
+        if isinstance(self.supervisor.motion, JointTrajectoryPlan):
+            if self._last_reference is not None:
+                stamp_ns = self.get_clock().now().nanoseconds
+                zeros = np.zeros_like(self._last_reference)
+                self._reference_pub.publish(self._reference_cdr.encode(stamp_ns, self._last_reference, zeros))
+        elif self._last_goal_pose is not None:
             stamp_ns = self.get_clock().now().nanoseconds
             self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, self._last_goal_pose))
             self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, np.zeros(3), np.zeros(3)))
@@ -342,20 +301,28 @@ class TrajectoryGeneratorNode(LoopingNode):
     def _cycle(self, now_ns: int) -> None:
         target = self._take_inputs(now_ns)
         supervisor = self.supervisor
-        if target is not None:
+        if isinstance(target, JointTrajectory):
+            self._plan_trajectory(target, now_ns)
+        elif target is not None:
             self._plan(target, now_ns)
             now_ns = time.monotonic_ns()  # the loop's clock, after planning (see _plan)
         timing = supervisor.time_into_motion(now_ns)
         if timing is not None:
             t, finished = timing
-            pose, (angular, linear) = supervisor.motion.sample(t)
             stamp_ns = self.get_clock().now().nanoseconds
-            self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
-            self._last_goal_pose = pose
-            self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
+            if isinstance(supervisor.motion, JointTrajectoryPlan):
+                stamp_ns = self._start_stamp_ns + int(t * 1e9)
+                q, qdot = supervisor.motion.sample(t)
+                self._reference_pub.publish(self._reference_cdr.encode(stamp_ns, q, qdot))
+                self._last_reference = q
+            else:
+                pose, (angular, linear) = supervisor.motion.sample(t)
+                self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
+                self._last_goal_pose = pose
+                self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
             if finished:
                 supervisor.finish(conv.stamp_key(conv.ns_to_stamp(stamp_ns)))
-                self.get_logger().info(f"line finished after {t:.3f} s; holding the final pose")
+                self.get_logger().info(f"{supervisor.motion_kind} finished after {t:.3f} s; holding its end")
         if supervisor.report_due(now_ns):
             self._publish_diagnostics()
 
@@ -369,11 +336,15 @@ class TrajectoryGeneratorNode(LoopingNode):
             ("final_goal_stamp", supervisor.final_goal_stamp),
             ("progress", f"{supervisor.progress:.4f}"),
             ("duration", f"{motion.duration:.4f}" if motion is not None else ""),
-            ("length", f"{motion.length:.6f}" if motion is not None else ""),
+            ("length", f"{motion.length:.6f}" if isinstance(motion, LineTrajectory) else ""),
+            ("motion", supervisor.motion_kind),
             ("time_scaling", self.time_scaling),
+            ("joint_time_scaling", self.joint_time_scaling),
+            ("task", self.task.name),
             ("rejected_targets", str(supervisor.rejected_targets)),
             ("rejected_stamp", supervisor.rejected_stamp),
             ("last_rejection", supervisor.last_rejection),
+            ("rejection_kind", supervisor.rejection_kind),
             ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
         level = self.diagnostic_level(supervisor.level)

@@ -228,18 +228,13 @@ class PipelineClient:
             self._publishers[key] = self.node.create_publisher(msg_type, topic, 10)
         return self._publishers[key]
 
-    def publish_delivered(self, topic: str, msg, timeout: float = 10.0, subscribers: int = 1) -> int:
-        """Publish ``msg`` once a subscriber is matched, and wait until they acknowledged it.
-
-        Returns:
-            The number of matched subscriptions.
+    def wait_subscribers(self, msg_type, topic: str, timeout: float = 10.0, subscribers: int = 1):
+        """The publisher on ``topic`` once every known subscription (at least ``subscribers``) matched it.
 
         Raises:
-            PipelineError: no subscriber within ``timeout`` or no acknowledgement.
+            PipelineError: no subscriber within ``timeout``.
         """
-        from rclpy.duration import Duration
-
-        publisher = self.publisher(type(msg), topic)
+        publisher = self.publisher(msg_type, topic)
 
         def all_matched() -> bool:
             # Every subscription the graph knows must be matched, not just the first one:
@@ -253,6 +248,20 @@ class PipelineClient:
                 f"no subscriber on {publisher.topic_name} after {timeout:g} s "
                 "(is the node running, same ROS_DOMAIN_ID and namespace?)"
             )
+        return publisher
+
+    def publish_delivered(self, topic: str, msg, timeout: float = 10.0, subscribers: int = 1) -> int:
+        """Publish ``msg`` once a subscriber is matched, and wait until they acknowledged it.
+
+        Returns:
+            The number of matched subscriptions.
+
+        Raises:
+            PipelineError: no subscriber within ``timeout`` or no acknowledgement.
+        """
+        from rclpy.duration import Duration
+
+        publisher = self.wait_subscribers(type(msg), topic, timeout, subscribers)
         # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
@@ -282,6 +291,54 @@ class PipelineClient:
         msg = self.pose_msg(pose, frame_id)
         self.publish_delivered("line_target", msg, timeout)
         return stamp_key(msg.header.stamp)
+
+    def send_joint_trajectory(self, msg, timeout: float = 10.0) -> str:
+        """Stamp a ``JointTrajectory`` now and publish it on ``joint_trajectory``; returns its stamp key."""
+        from manip_kin.nodes.conversions import stamp_key
+
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        self.publish_delivered("joint_trajectory", msg, timeout)
+        return stamp_key(msg.header.stamp)
+
+    def robot_description(self, timeout: float = 10.0) -> str:
+        """The URDF on ``robot_description`` (transient local: the latched one), waiting for it."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import String
+
+        received: list[str] = []
+        qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        subscription = self.node.create_subscription(
+            String, "robot_description", lambda m: received.append(m.data), qos
+        )
+        try:
+            if not self.spin_until(lambda: received, timeout):
+                raise PipelineError(
+                    f"no {self.topic('robot_description')} within {timeout:g} s (is robot_state running? "
+                    "or give --robot)"
+                )
+        finally:
+            self.node.destroy_subscription(subscription)
+        return received[-1]
+
+    def set_parameter(self, node_name: str, name: str, value, timeout: float = 10.0) -> None:
+        """Set parameter ``name`` of node ``node_name`` (in this namespace) through its parameter service.
+
+        Raises:
+            PipelineError: no service within ``timeout``, or the node refused (with its reason).
+        """
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
+
+        remote = f"{self.namespace}/{node_name}" if self.namespace else node_name
+        parameters = AsyncParameterClient(self.node, remote)
+        if not parameters.wait_for_services(timeout_sec=timeout):
+            raise PipelineError(f"no parameter service of {remote} within {timeout:g} s")
+        future = parameters.set_parameters([Parameter(name, value=value)])
+        if not self.spin_until(future.done, timeout):
+            raise PipelineError(f"{remote} did not answer setting {name} within {timeout:g} s")
+        result = future.result().results[0]
+        if not result.successful:
+            raise PipelineError(f"{remote} refused {name} = {value!r}: {result.reason}")
 
     # --- waiting ---------------------------------------------------------------------------------
 

@@ -1,0 +1,209 @@
+"""``manip_kin move``: a joint-space move through ``trajectory_generator``.
+
+The command reads the running arm's model from ``robot_description`` (or ``--robot``) and
+its configuration from ``joint_states``, checks the target against the joint limits,
+times the move (``--duration``, or the shortest duration within the velocity limits),
+and sends one ``trajectory_msgs/JointTrajectory`` point on ``joint_trajectory``. The
+generator interpolates it with its ``joint_time_scaling`` (``--time-scaling`` sets that
+parameter first when it differs) and streams ``joint_reference`` to the controller.
+``--wait`` follows ``/diagnostics`` until the controller reports the move converged.
+
+Exit codes: 0 delivered (and converged with ``--wait``); 1 not converged within
+``--timeout``; 2 bad input (wrong joint count, a target outside the limits, a duration too
+short for the velocity limits, no pipeline), one line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from manip_kin.cli.common import add_json_argument, add_namespace_argument, namespace_from_args, print_json
+from manip_kin.errors import InvalidArgumentError, JointCountError
+from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint, move_duration, plan_joint_trajectory
+from manip_kin.model import RobotModel
+
+_GENERATOR = "trajectory_generator"
+_CONTROLLER = "cartesian_controller"
+
+
+def register(subparsers) -> None:
+    """Add ``move``."""
+    move = subparsers.add_parser(
+        "move",
+        help="joint-space move of the running arm to --q through trajectory_generator (optionally wait)",
+        description="Move every joint from where it is to --q along q0 + s(t)(q - q0): one JointTrajectory "
+        "point on joint_trajectory, interpolated by trajectory_generator with its time scaling, followed by "
+        "cartesian_controller. Example (scara): manip_kin move --q 0.7854 0.7854 0.2 0 --duration 2 "
+        "--time-scaling cubic --wait",
+        epilog="exit status: 0 done, 1 not converged within --timeout, 2 bad input (one line on stderr)",
+    )
+    move.add_argument(
+        "--q", nargs="+", type=float, required=True, metavar="V", help="target joint values in model order [rad | m]"
+    )
+    move.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="duration of the move [s] (default: the shortest within the joint velocity limits)",
+    )
+    move.add_argument(
+        "--time-scaling",
+        choices=JOINT_TIME_SCALINGS,
+        default=None,
+        help="s(t): cubic 3τ²-2τ³, quintic 10τ³-15τ⁴+6τ⁵ or trapezoidal; sets the generator's "
+        "joint_time_scaling parameter (default: the generator's, cubic unless configured)",
+    )
+    move.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAME|FILE",
+        help="the arm's model (default: the URDF on robot_description from robot_state)",
+    )
+    move.add_argument("--wait", action="store_true", help="block until the controller reports converged")
+    move.add_argument(
+        "--timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="seconds to wait for the pipeline, and for the move with --wait (default 30)",
+    )
+    add_namespace_argument(move)
+    add_json_argument(move)
+    move.set_defaults(run=run_move)
+
+
+def _model(args, client) -> RobotModel:
+    if args.robot is not None:
+        from manip_kin.robots import load_robot
+
+        return load_robot(args.robot)
+    from manip_kin.urdf import load_urdf_string
+
+    return load_urdf_string(client.robot_description(args.timeout), source=client.topic("robot_description"))
+
+
+def _check_target(model: RobotModel, values) -> np.ndarray:
+    if len(values) != model.dof:
+        raise JointCountError("--q", len(values), model.dof)
+    q = model.check_q(values, "--q")
+    for j, value in enumerate(q):
+        if not model.lower[j] <= value <= model.upper[j]:
+            unit = "rad" if model.joints[j].is_revolute else "m"
+            raise InvalidArgumentError(
+                f"--q: joint '{model.joint_names[j]}' = {value:g} {unit} is outside its limits; "
+                f"valid: [{model.lower[j]:.6g}, {model.upper[j]:.6g}] {unit}"
+            )
+    return q
+
+
+def _set_time_scaling(client, scaling: str, timeout: float) -> str:
+    """The generator's joint_time_scaling after asking for ``scaling`` (set only when it differs)."""
+    current = client.wait_status(_GENERATOR, timeout).values.get("joint_time_scaling", "")
+    if current == scaling:
+        return current
+    client.set_parameter(_GENERATOR, "joint_time_scaling", scaling, timeout)
+    return scaling
+
+
+def run_move(args: argparse.Namespace) -> int:
+    """``manip_kin move``."""
+    from manip_kin.nodes.conversions import JointStateMapper
+    from manip_kin.nodes.joint_messages import make_joint_trajectory
+    from manip_kin.pipeline import PipelineClient, PipelineError
+
+    if args.duration is not None and not args.duration > 0:
+        raise InvalidArgumentError(f"--duration {args.duration!r}; valid: seconds > 0")
+    if not args.timeout > 0:
+        raise InvalidArgumentError(f"--timeout {args.timeout!r}; valid: seconds > 0")
+    namespace = namespace_from_args(args)
+    with PipelineClient(namespace=namespace) as client:
+        try:
+            model = _model(args, client)
+            q_goal = _check_target(model, args.q)
+            client.current_positions(args.timeout)
+            q_start = JointStateMapper(model.joint_names).positions(client.joint_state)
+            scaling = client.wait_status(_GENERATOR, args.timeout).values.get("joint_time_scaling") or "cubic"
+            if args.time_scaling is not None:
+                scaling = _set_time_scaling(client, args.time_scaling, args.timeout)
+            shortest = move_duration(model, q_start, q_goal, scaling)
+            duration = args.duration or shortest
+            point = TrajectoryPoint(duration, q_goal)
+            try:
+                plan_joint_trajectory(model, q_start, model.joint_names, [point], scaling)
+            except InvalidArgumentError as error:
+                if "too fast" not in str(error):
+                    raise
+                needs = str(error).split(": ", 1)[1].split(";")[0]  # "joint 'j1' needs 15 rad/s, its limit is 2 rad/s"
+                raise InvalidArgumentError(
+                    f"--duration {duration:g} s is too short: {needs}; valid: >= {shortest:.4g} s for this move "
+                    f"with {scaling} scaling"
+                ) from None
+            if args.wait:
+                client.wait_status(_CONTROLLER, args.timeout)  # /diagnostics matched before the move goes out
+            start = time.monotonic()
+            stamp = client.send_joint_trajectory(make_joint_trajectory(model.joint_names, [point]), args.timeout)
+        except PipelineError as error:
+            print(f"manip_kin move: error: {error}", file=sys.stderr)
+            return 2
+        payload = {
+            "topic": client.topic("joint_trajectory"),
+            "stamp": stamp,
+            "joint_names": model.joint_names,
+            "q_start": q_start.tolist(),
+            "q_goal": q_goal.tolist(),
+            "duration": duration,
+            "time_scaling": scaling,
+        }
+        summary = (
+            f"move of {model.name} from {np.round(q_start, 4).tolist()} to {np.round(q_goal, 4).tolist()} "
+            f"in {duration:.3f} s ({scaling})"
+        )
+        if not args.wait:
+            _report(args, payload, f"{summary} delivered on {payload['topic']} (stamp {stamp})")
+            return 0
+        return _await(args, client, stamp, start, payload, summary)
+
+
+def _await(args, client, stamp: str, start: float, payload: dict, summary: str) -> int:
+    from manip_kin.pipeline import PipelineError
+
+    try:
+        generator = client.wait_line_done(stamp, args.timeout, _GENERATOR)
+    except PipelineError as error:
+        print(f"manip_kin move: error: {error}", file=sys.stderr)
+        return 1
+    if generator.values.get("rejected_stamp") == stamp:
+        print(f"manip_kin move: error: trajectory rejected: {generator.values.get('last_rejection')}", file=sys.stderr)
+        return 2
+    remaining = max(args.timeout - (time.monotonic() - start), 0.1)
+    converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining, _CONTROLLER)
+    elapsed = time.monotonic() - start
+    errors = {key: _number(status, f"{key}_error") for key in ("joint", "position", "orientation")}
+    payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
+    verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s"
+    if errors["joint"] is None:
+        detail = "errors unknown (no controller status for this move)"
+    else:
+        detail = (
+            f"joint error {errors['joint']:.3g}, position error {errors['position']:.3g} m, "
+            f"orientation error {errors['orientation']:.3g} rad"
+        )
+    _report(args, payload, f"{summary} {verdict}: {detail}")
+    return 0 if converged else 1
+
+
+def _number(status, key: str) -> float | None:
+    value = status.number(key) if status is not None else float("nan")
+    return None if value != value else value
+
+
+def _report(args, payload: dict, line: str) -> None:
+    if args.json:
+        print_json(payload)
+    else:
+        print(line)

@@ -1,0 +1,165 @@
+"""``cartesian_controller``'s interface: its name, states, parameters (with units and checks) and ``--help``.
+
+Kept apart from the node so the table can be read (and documented) on its own.
+"""
+
+from __future__ import annotations
+
+from manip_kin.nodes.params import ParamSpec, usage_text
+from manip_kin.nodes.robot_model import model_parameters
+from manip_kin.supervisors import ControllerState
+
+NODE_NAME = "cartesian_controller"
+
+#: Controller states reported as the DiagnosticStatus message and the ``state`` value.
+STATES = tuple(state.value for state in ControllerState)
+
+PARAMETERS = (
+    *model_parameters(""),
+    ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
+    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0, tunable=True),
+    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0, tunable=True),
+    ParamSpec(
+        "frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"
+    ),
+    ParamSpec(
+        "task",
+        "str",
+        "",
+        "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)",
+    ),
+    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0, tunable=True),
+    ParamSpec(
+        "singular_threshold",
+        "float",
+        0.02,
+        "smallest singular value below which damping rises",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits", tunable=True),
+    ParamSpec(
+        "respect_position_limits",
+        "bool",
+        True,
+        "redistribute the task over joints not at a position limit",
+        tunable=True,
+    ),
+    ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
+    ParamSpec(
+        "joint_state_timeout",
+        "float",
+        0.1,
+        "no joint state for longer than this: publish zeros",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "goal_timeout",
+        "float",
+        0.0,
+        "a goal older than this is dropped and zeros published (0 = goals never expire)",
+        "s",
+        minimum=0.0,
+        tunable=True,
+    ),
+    ParamSpec(
+        "goal_twist_timeout",
+        "float",
+        0.02,
+        "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "position_tolerance",
+        "float",
+        1e-4,
+        "converged when the position error is below this",
+        "m",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "orientation_tolerance",
+        "float",
+        1e-3,
+        "... and the orientation error below this",
+        "rad",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "gain_joint",
+        "float",
+        5.0,
+        "joint-space gain K on q_ref - q when following a joint reference (plus its velocity)",
+        "1/s",
+        minimum=0.0,
+        tunable=True,
+    ),
+    ParamSpec(
+        "joint_tolerance",
+        "float",
+        1e-3,
+        "converged on a joint reference when every joint is within this of it",
+        "rad | m",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "quaternion_tolerance",
+        "float",
+        1e-2,
+        "a goal quaternion whose length differs from 1 by more is rejected",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "diagnostics_rate_hz",
+        "float",
+        10.0,
+        "rate of /diagnostics (also sent at once on a state change)",
+        "Hz",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "realtime_priority",
+        "int",
+        0,
+        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+        minimum=0,
+    ),
+)
+
+USAGE = usage_text(
+    NODE_NAME,
+    "Resolved-rate cartesian controller: drives the controlled frame (tool if any, else end\n"
+    "effector) to the latest goal_pose with joint-rate commands at rate_hz, adding the\n"
+    "goal_twist feed-forward while it is fresh. A goal with a non-finite value, a quaternion far\n"
+    "from unit length or a frame other than the base frame is rejected (previous goal kept).\n"
+    "A joint_reference (positions + velocities by joint name) is followed in joint space\n"
+    "instead (q_dot = q_dot_ref + gain_joint (q_ref - q), within the limits); the latest goal\n"
+    "of either kind wins. Convergence counts only the task's components.\n"
+    "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
+    f"States on /diagnostics: {', '.join(STATES)}.",
+    PARAMETERS,
+    subscribes=[
+        ("goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
+        ("goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
+        ("joint_reference", "sensor_msgs/JointState", "joint positions + velocities to follow (trajectory_generator)"),
+        ("joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
+    ],
+    publishes=[
+        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
+        (
+            "/diagnostics",
+            "diagnostic_msgs/DiagnosticArray",
+            "state, errors [m, rad], manipulability, damping, limits, loop timing",
+        ),
+    ],
+    example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000 -p gain_linear:=1.5",
+)

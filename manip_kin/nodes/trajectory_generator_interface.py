@@ -1,0 +1,142 @@
+"""``trajectory_generator``'s interface: its name, states, parameters (with units and checks) and ``--help``.
+
+Kept apart from the node so the table can be read (and documented) on its own.
+"""
+
+from __future__ import annotations
+
+from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS
+from manip_kin.nodes.params import ParamSpec, usage_text
+from manip_kin.nodes.robot_model import model_parameters
+from manip_kin.supervisors import GeneratorState
+from manip_kin.trajectory import TIME_SCALINGS
+
+NODE_NAME = "trajectory_generator"
+
+#: States reported on /diagnostics.
+STATES = tuple(state.value for state in GeneratorState)
+
+PARAMETERS = (
+    *model_parameters(""),
+    ParamSpec("rate_hz", "float", 500.0, "rate of goal_pose and goal_twist while a line runs", "Hz", positive=True),
+    ParamSpec(
+        "time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS, tunable=True
+    ),
+    ParamSpec(
+        "joint_time_scaling",
+        "str",
+        "cubic",
+        "interpolation between the points of a joint trajectory",
+        choices=JOINT_TIME_SCALINGS,
+        tunable=True,
+    ),
+    ParamSpec(
+        "task",
+        "str",
+        "",
+        "pose components a line must reach, as the controller's task: full, position, position_yaw, ... "
+        "('' = full for 6+ joints)",
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_linear_velocity",
+        "float",
+        0.25,
+        "speed limit of the position (the constant speed of 'constant')",
+        "m/s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_linear_acceleration",
+        "float",
+        0.5,
+        "acceleration limit of the position (not used by 'constant')",
+        "m/s^2",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_angular_velocity",
+        "float",
+        0.5,
+        "angular speed limit of the orientation",
+        "rad/s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_angular_acceleration",
+        "float",
+        1.0,
+        "angular acceleration limit (not used by 'constant')",
+        "rad/s^2",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits", tunable=True),
+    ParamSpec(
+        "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
+    ),
+    ParamSpec(
+        "tool_pose_timeout",
+        "float",
+        0.5,
+        "a target is rejected when tool_pose (a trajectory: joint_states) is older than this",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "quaternion_tolerance",
+        "float",
+        1e-2,
+        "a target quaternion whose length differs from 1 by more is rejected",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True, tunable=True),
+    ParamSpec(
+        "diagnostics_rate_hz",
+        "float",
+        5.0,
+        "rate of /diagnostics (also sent at once on a state change)",
+        "Hz",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "realtime_priority",
+        "int",
+        0,
+        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+        minimum=0,
+    ),
+)
+
+USAGE = usage_text(
+    NODE_NAME,
+    "Straight-line goals: on a line_target pose, plans a line from the current tool_pose\n"
+    "(position along the segment, orientation by slerp) timed by time_scaling within the\n"
+    "velocity and acceleration limits, checks the arm can follow it from the current\n"
+    "joint_states, and streams goal_pose and goal_twist at rate_hz until the end, then\n"
+    "publishes the final pose once and holds. A joint_trajectory (as ros2_control's\n"
+    "JointTrajectoryController takes it) is interpolated with joint_time_scaling from the\n"
+    "current joint_states and streamed as joint_reference. The latest goal of either kind\n"
+    "pre-empts the running motion. Unreachable or malformed goals are rejected with a log line.",
+    PARAMETERS,
+    subscribes=[
+        ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
+        ("joint_trajectory", "trajectory_msgs/JointTrajectory", "joint names, points with time_from_start"),
+        ("tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
+        ("joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
+    ],
+    publishes=[
+        ("goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
+        ("goal_twist", "geometry_msgs/TwistStamped", "the line's velocity (feed-forward)"),
+        ("joint_reference", "sensor_msgs/JointState", "a joint trajectory's positions and velocities"),
+        ("planned_path", "nav_msgs/Path", "the planned tool path, transient local"),
+        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "state, progress, target and final goal stamps"),
+    ],
+    example=f"{NODE_NAME} --ros-args -p robot:=irb120 -p time_scaling:=constant -p max_linear_velocity:=0.4",
+)
