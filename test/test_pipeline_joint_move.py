@@ -21,6 +21,7 @@ MANIP_KIN = str(Path(sys.executable).parent / "manip_kin")
 Q_START = np.zeros(4)
 Q_GOAL = np.array([math.pi / 4, math.pi / 4, 0.2, 0.0])
 DURATION = 2.0
+NAMES = ["joint1", "joint2", "joint3", "joint4"]
 # The pipeline's latency budget: reference published → taken by the controller's next cycle
 # (≤ 2 ms at 500 Hz) → command integrated by robot_state's next cycle (≤ 2 ms) → stamped;
 # 10 ms leaves room for a loaded machine (cycles late by a few ms).
@@ -59,6 +60,8 @@ def _run_recording(pipeline, args, topics=("joint_states", "joint_reference"), t
 
 
 def _series(messages, after_ns=0):
+    # Only this arm's messages (another test run that picked the same domain would show up here).
+    messages = [m for m in messages if list(m.name) == NAMES]
     stamps = np.array([conv.stamp_to_ns(m.header.stamp) for m in messages])
     keep = stamps >= after_ns
     positions = np.array([m.position for m in messages])[keep]
@@ -88,19 +91,21 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     expected = Q_START + s[:, None] * (Q_GOAL - Q_START)
     deviation = np.abs(positions - expected)
     # Tolerance: with velocity feed-forward the arm lags the reference by the pipeline's
-    # latency, so the deviation is at most peak joint speed (1.5 |Δq| / T) times LATENCY,
-    # plus 0.1 % of |Δq| for the proportional loop's transient. That is 6.7 mrad on the two
-    # revolute joints and 1.7 mm on the prismatic one; a quintic instead of a cubic scaling
-    # would be off by up to 42 mrad (> 6.7 mrad for 60 % of the move), a path late by 20 ms
-    # by 12 mrad. On a machine shared with other jobs the loops sometimes stall for tens of
-    # ms: 95 % of the samples must be within the tolerance, every sample within five times it
-    # (a 50 ms stall).
-    tolerance = 1.5 * np.abs(Q_GOAL - Q_START) / DURATION * LATENCY + 1e-3 * np.abs(Q_GOAL - Q_START) + 1e-6
-    during = (t >= 0.0) & (t <= DURATION + 0.5)
-    typical = np.percentile(deviation[during], 95, axis=0)
+    # latency, so the deviation is at most peak joint speed (1.5 |Δq| / T) times that latency,
+    # plus 0.1 % of |Δq| for the proportional loop's transient. On time (LATENCY = 10 ms) that
+    # is 6.7 mrad on the two revolute joints and 1.7 mm on the prismatic one; a quintic
+    # instead of a cubic scaling would be off by up to 42 mrad, a path late by 20 ms by 12 mrad.
+    # A loop that ran late carries the previous command on for that long: the nodes' own worst
+    # lateness (their loop statistics) is added, as a loaded machine makes them late.
+    client = scara.client()
+    lateness_s = 1e-3 * sum(
+        float(client.wait_status(name).values["loop_period_error_max_ms"])
+        for name in ("robot_state", "cartesian_controller", "trajectory_generator")
+    )
+    peak_speed = 1.5 * np.abs(Q_GOAL - Q_START) / DURATION
+    tolerance = peak_speed * (LATENCY + lateness_s) + 1e-3 * np.abs(Q_GOAL - Q_START) + 1e-6
     worst = deviation.max(axis=0)
-    assert np.all(typical <= tolerance), (typical, tolerance)
-    assert np.all(worst <= 5 * tolerance), (worst, tolerance)
+    assert np.all(worst <= tolerance), (worst, tolerance, lateness_s)
     assert len(t[(t > 0) & (t < DURATION)]) > 0.5 * 500 * DURATION  # the whole move was observed
     # At rest at both ends: the reference's velocity is exactly zero at t = 0 and t = T; the
     # arm's rate is ~0 before the start and within 2 ms after it (the cubic's own rate there
@@ -115,14 +120,14 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     np.testing.assert_allclose(peak[:3], 1.5 * np.abs(Q_GOAL - Q_START)[:3] / DURATION, rtol=0.03)
     np.testing.assert_allclose(positions[-1], Q_GOAL, atol=1e-3)
     print(
-        f"scara cubic move: deviation per joint p95 {typical.tolist()}, max {worst.tolist()} "
-        f"(tolerance {tolerance.tolist()})"
+        f"scara cubic move: max deviation per joint {worst.tolist()} (tolerance {tolerance.tolist()}, "
+        f"loops' worst lateness {lateness_s * 1e3:.1f} ms)"
     )
 
 
-def test_move_back_with_automatic_duration_and_bad_input(scara):
+def test_move_back_quintic_with_automatic_duration_and_bad_input(scara):
     result = subprocess.run(
-        [MANIP_KIN, "move", "--q", "0", "0", "0", "0", "--wait", "--json"],
+        [MANIP_KIN, "move", "--q", "0", "0", "0", "0", "--time-scaling", "quintic", "--wait", "--json"],
         env=scara.env,
         capture_output=True,
         text=True,
@@ -130,16 +135,25 @@ def test_move_back_with_automatic_duration_and_bad_input(scara):
     )
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
-    # Automatic duration: the slowest joint at its velocity limit at the cubic's peak, 1.5 |Δq| / v.
-    # From wherever the first test left the arm (at most 1e-3 from Q_GOAL).
+    # --time-scaling set the generator's parameter (a live one) for this move and the next.
+    assert report["time_scaling"] == "quintic" and report["converged"]
+    client = scara.client()  # its /diagnostics queue may still hold older statuses: wait for the value
+
+    def quintic():
+        status = client.latest_status("trajectory_generator")
+        return status is not None and status.values.get("joint_time_scaling") == "quintic"
+
+    assert client.spin_until(quintic, 5), scara.log_tail("trajectory_generator")
+    # Automatic duration: the slowest joint at its velocity limit at the quintic's peak rate,
+    # 1.875 |Δq| / v, from wherever the first test left the arm (within 1e-3 of Q_GOAL).
     q_start = np.array(report["q_start"])
     limits = np.array([2.0, 2.0, 0.5, 2.0])
-    assert report["duration"] == pytest.approx(1.5 * np.max(np.abs(q_start) / limits), rel=1e-9)
-    assert report["converged"]
+    assert report["duration"] == pytest.approx(1.875 * np.max(np.abs(q_start) / limits), rel=1e-9)
     for args, fragment in [
         (["--q", "0", "0", "0.7", "0"], "'joint3' = 0.7 m is outside its limits; valid: [0, 0.5] m"),
         (["--q", "0", "0"], "--q has 2 values, the robot has 4 joints"),
-        (["--q", "1", "0", "0", "0", "--duration", "0.1"], "joint 'joint1' needs 15 rad/s"),
+        # quintic (set above): peak rate 1.875 |Δq| / T
+        (["--q", "1", "0", "0", "0", "--duration", "0.1"], "joint 'joint1' needs 18.75 rad/s"),
         (["--q", "0", "0", "0", "0", "--duration", "-1"], "--duration -1.0; valid: seconds > 0"),
     ]:
         bad = subprocess.run([MANIP_KIN, "move", *args], env=scara.env, capture_output=True, text=True, timeout=60)

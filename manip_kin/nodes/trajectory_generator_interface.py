@@ -36,7 +36,6 @@ PARAMETERS = (
         "",
         "pose components a line must reach, as the controller's task: full, position, position_yaw, ... "
         "('' = full for 6+ joints)",
-        tunable=True,
     ),
     ParamSpec(
         "max_linear_velocity",
