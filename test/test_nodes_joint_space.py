@@ -102,6 +102,7 @@ def test_multi_point_trajectory_streamed_through_its_points_on_time(harness, sca
     assert all(list(r.name) == NAMES for r in references)
     times, positions, velocities = _reference_samples(references)
     assert np.all(np.diff(times) > 0)
+    # The first reference is the start (t = 0): where the arm is.
     np.testing.assert_allclose(positions[0], Q0, atol=1e-12)
     # On time: a reference is stamped with the time it is for (start + t), so near a point's
     # time t_i the stream must be that point moving at its velocity: for a sample at

@@ -202,29 +202,31 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     # --- planning ----------------------------------------------------------------------------------
 
-    def _plan_trajectory(self, msg: JointTrajectory, now_ns: int) -> bool:
-        """Plan a joint trajectory from the current joint state; True when it started."""
+    def _plan_trajectory(self, msg: JointTrajectory) -> int | None:
+        """Plan a joint trajectory from the current joint state; its start time [ns] when it started."""
         if not self._current_state(msg):
-            return False
+            return None
         try:
             q = self._mapper.positions(self._joint_state_msg)
             names, points = trajectory_points(msg)
             plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling)
         except ManipKinError as error:
             self._reject(msg, str(error))
-            return False
-        # References are stamped with the time they are for, start + t, on the ROS clock: the
-        # loop's start time (monotonic) moved to that clock.
-        self._start_stamp_ns = now_ns + self.get_clock().now().nanoseconds - time.monotonic_ns()
+            return None
         detail = f"joint trajectory of {plan.point_count} point(s) in {plan.duration:.3f} s"
+        times = np.linspace(0.0, plan.duration, self._path_points)
+        self._publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
+        # It starts once planned and published (that takes a few ms): its first reference is
+        # then where the arm is. References are stamped with the time they are for, start + t,
+        # on the ROS clock: the start (monotonic) moved to that clock.
+        now_ns = time.monotonic_ns()
+        self._start_stamp_ns = now_ns + self.get_clock().now().nanoseconds - time.monotonic_ns()
         preempted = self.supervisor.start(plan, "joint trajectory", now_ns, conv.stamp_key(msg.header.stamp), detail)
         self.get_logger().info(
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.joint_time_scaling} "
             f"{detail} from {np.round(q, 4).tolist()} to {np.round(plan.goal, 4).tolist()}"
         )
-        times = np.linspace(0.0, plan.duration, self._path_points)
-        self._publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
-        return True
+        return now_ns
 
     def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
         """Plan a line to ``target_msg``; True when it replaced the running line."""
@@ -301,11 +303,12 @@ class TrajectoryGeneratorNode(LoopingNode):
     def _cycle(self, now_ns: int) -> None:
         target = self._take_inputs(now_ns)
         supervisor = self.supervisor
-        if isinstance(target, JointTrajectory):
-            self._plan_trajectory(target, now_ns)
-        elif target is not None:
-            self._plan(target, now_ns)
-            now_ns = time.monotonic_ns()  # the loop's clock, after planning (see _plan)
+        if target is not None:
+            started = self._plan_trajectory(target) if isinstance(target, JointTrajectory) else None
+            if not isinstance(target, JointTrajectory):
+                self._plan(target, now_ns)
+            # The loop's clock after planning (see _plan); a trajectory's first sample is its start.
+            now_ns = started if started is not None else time.monotonic_ns()
         timing = supervisor.time_into_motion(now_ns)
         if timing is not None:
             t, finished = timing
