@@ -201,3 +201,20 @@ def test_exported_description_reads_back_with_its_own_chain_without_link_names(r
     # Link names given explicitly win over the export's own chain.
     if model.has_tool:
         assert not load_urdf_string(model_to_urdf(model), tip_link="ee").has_tool
+
+
+def test_every_command_taking_robot_takes_the_link_options():
+    from manip_kin.cli import build_parser
+
+    commands = build_parser()._subparsers._group_actions[0].choices
+    with_robot = {name for name, parser in commands.items() if "--robot" in parser._option_string_actions}
+    assert {"fk", "jacobian", "ik", "simulate", "move"} <= with_robot
+    for name in with_robot:
+        options = commands[name]._option_string_actions
+        assert {"--base-link", "--tip-link", "--tool-link"} <= set(options), name
+
+
+def test_cli_move_passes_the_link_options_to_the_model(capsys):
+    # Refused before anything is sent: link names for a robot YAML.
+    code, out, err = run_cli(capsys, ["move", "--robot", "scara", "--tip-link", "link2", "--q", "0", "0", "0", "0"])
+    assert code == 2 and "tip_link='link2'" in err and "not a URDF" in err

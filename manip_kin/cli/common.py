@@ -22,6 +22,11 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
         metavar="NAME|FILE",
         help=f"bundled robot ({', '.join(bundled_robot_names())}) or a robot .yaml/.urdf path",
     )
+    add_link_arguments(parser)
+
+
+def add_link_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--base-link``, ``--tip-link``, ``--tool-link``: the chain of a URDF robot."""
     parser.add_argument(
         "--base-link", metavar="LINK", default=None, help="URDF only: first link of the chain (default: the root link)"
     )

@@ -21,7 +21,13 @@ import time
 
 import numpy as np
 
-from manip_kin.cli.common import add_json_argument, add_namespace_argument, namespace_from_args, print_json
+from manip_kin.cli.common import (
+    add_json_argument,
+    add_link_arguments,
+    add_namespace_argument,
+    namespace_from_args,
+    print_json,
+)
 from manip_kin.errors import InvalidArgumentError, JointCountError
 from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint, move_duration, plan_joint_trajectory
 from manip_kin.model import RobotModel
@@ -64,6 +70,7 @@ def register(subparsers) -> None:
         metavar="NAME|FILE",
         help="the arm's model (default: the URDF on robot_description from robot_state)",
     )
+    add_link_arguments(move)
     move.add_argument("--wait", action="store_true", help="block until the controller reports converged")
     move.add_argument(
         "--timeout",
@@ -78,13 +85,15 @@ def register(subparsers) -> None:
 
 
 def _model(args, client) -> RobotModel:
+    links = {"base_link": args.base_link, "tip_link": args.tip_link, "tool_link": args.tool_link}
     if args.robot is not None:
         from manip_kin.robots import load_robot
 
-        return load_robot(args.robot)
+        return load_robot(args.robot, **links)
     from manip_kin.urdf import load_urdf_string
 
-    return load_urdf_string(client.robot_description(args.timeout), source=client.topic("robot_description"))
+    text = client.robot_description(args.timeout)
+    return load_urdf_string(text, source=client.topic("robot_description"), **links)
 
 
 def _check_target(model: RobotModel, values) -> np.ndarray:
