@@ -40,13 +40,15 @@ from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.reader import message_class
+from manip_kin.recording.tf_synthesis import DEFAULT_TF_RATE_HZ, TF_TOPICS, TfSynthesizer, write_tf
 from manip_kin.recording.writer import COMPRESSION_CHOICES, RecordingWriter
 
 # Every manip_kin topic is subscribed at start, before any publisher is seen, so a one-shot
 # message (a goal sent by `manip_kin goal` right after its publisher appears) is not missed
 # while discovery catches up. Relative names resolve in the recorder's namespace.
 MANIP_KIN_TOPIC_TYPES = PIPELINE_TOPIC_TYPES
-DEFAULT_TOPICS = tuple(MANIP_KIN_TOPIC_TYPES)
+# /tf and /tf_static are recorded when a node publishes them (a ROS install), else synthesised.
+DEFAULT_TOPICS = tuple(MANIP_KIN_TOPIC_TYPES) + TF_TOPICS
 LATCHED_TOPICS = frozenset({"robot_description"})
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_CHECK_PERIOD_S = 0.25
@@ -71,6 +73,12 @@ parameters:
   compression   string    zstd (default) | lz4 | none: MCAP chunk compression
   duration      double    stop after this many seconds [s]; 0 = until Ctrl-C/SIGTERM (default 0)
   max_messages  int       stop after this many messages; 0 = unlimited (default 0)
+  tf_rate_hz    double    rate of the /tf written from joint_states when no node publishes /tf
+                          [Hz] (default {DEFAULT_TF_RATE_HZ:g}, as robot_state's tf_rate_hz)
+  frame_prefix  string    prefix of the synthesised TF frame ids (default "", as robot_state's)
+
+Without a live /tf, the recorder writes /tf and /tf_static itself (tf2_msgs/msg/TFMessage)
+from the recorded joint_states and robot_description, so the file alone shows the arm.
 
 Ctrl-C or SIGTERM finish the file; a SIGKILL loses at most about the last second,
 and `manip_kin info --salvage OUT FILE` recovers the rest."""
@@ -167,6 +175,23 @@ class RecorderNode(Node):
                 _descriptor("stop after this many messages; 0 = unlimited", ParameterType.PARAMETER_INTEGER),
             ).value
         )
+        tf_rate_hz = float(
+            self.declare_parameter(
+                "tf_rate_hz",
+                DEFAULT_TF_RATE_HZ,
+                _descriptor("rate of the synthesised /tf [Hz]", ParameterType.PARAMETER_DOUBLE),
+            ).value
+        )
+        frame_prefix = str(
+            self.declare_parameter(
+                "frame_prefix", "", _descriptor("prefix of synthesised frame ids", ParameterType.PARAMETER_STRING)
+            ).value
+        )
+        if not tf_rate_hz > 0:
+            raise RecordingError(f"parameter tf_rate_hz is {tf_rate_hz}; valid: a positive rate [Hz]")
+        # TF from the recorded joint states until a live /tf is recorded (see _discover).
+        self._tf: TfSynthesizer | None = TfSynthesizer(tf_rate_hz, frame_prefix)
+        self._tf_note = ""
         if compression not in COMPRESSION_CHOICES:
             raise RecordingError(f"parameter compression is {compression!r}; valid: {', '.join(COMPRESSION_CHOICES)}")
         if self._duration_s < 0 or self._max_messages < 0:
@@ -217,6 +242,11 @@ class RecorderNode(Node):
             if topic in self._skipped or not self._is_wanted(topic):
                 continue
             publishers = self.get_publishers_info_by_topic(topic)
+            if topic == "/tf" and publishers and self._tf is not None:
+                self._tf_note = "live /tf recorded (none synthesised)"
+                self.get_logger().info("a node publishes /tf: recording it, no longer synthesising TF")
+                with self._lock:
+                    self._tf = None
             if topic in self._topics:
                 entry = self._topics[topic]
                 # Sequence gaps only mean drops while one publisher numbers the messages.
@@ -376,6 +406,9 @@ class RecorderNode(Node):
             if not self._writer.has_topic(entry.name):
                 self._add_channel(entry.name, entry.type_name, self.get_publishers_info_by_topic(entry.name))
             self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
+            if self._tf is not None:
+                for out in self._tf.feed(entry.name, entry.type_name, data, received):
+                    write_tf(self._writer, out)
             count = self._writer.message_count
         entry.received += 1
         sequence = info.get("publication_sequence_number")
@@ -424,8 +457,10 @@ class RecorderNode(Node):
             )
             heard = {name for name, entry in self._topics.items() if entry.received}
             missing = [] if self._all_topics else sorted(self._wanted - heard)
+            missing = [t for t in missing if t not in TF_TOPICS or not self._tf or not self._tf.tf_count]
             missing_text = f"; never published: {' '.join(missing)}" if missing else ""
-            self._finished_line = f"{summary.one_line()}; {dropped_text}{missing_text}"
+            tf_text = self._tf.status() if self._tf is not None else self._tf_note
+            self._finished_line = f"{summary.one_line()}; {dropped_text}{missing_text}; {tf_text}"
         return self._finished_line
 
 

@@ -28,7 +28,9 @@ from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.visuals import RobotVisuals
 from manip_kin.robots import bundled_robot_names
+from manip_kin.urdf import model_to_urdf
 
 NODE_NAME = "robot_state"
 
@@ -68,6 +70,10 @@ PARAMETERS = (
         minimum=0.0,
         tunable=True,
     ),
+    ParamSpec("frame_prefix", "str", "", "prepended to every TF frame id (as robot_state_publisher's)"),
+    ParamSpec("tf_rate_hz", "float", 50.0, "rate of /tf (where tf2_msgs is installed)", "Hz", positive=True),
+    ParamSpec("markers_rate_hz", "float", 10.0, "rate of the markers topic (0: off)", "Hz", minimum=0.0),
+    ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", positive=True),
     ParamSpec(
         "realtime_priority",
         "int",
@@ -95,6 +101,8 @@ USAGE = usage_text(
         ("ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
         ("tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
         ("robot_description", "std_msgs/String", "URDF of the model, once, transient local"),
+        ("/tf, /tf_static", "tf2_msgs/TFMessage", "link transforms, where tf2_msgs is installed"),
+        ("markers", "visualization_msgs/MarkerArray", "goal axes, planned path, tool trail, joint limits"),
         ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state"),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000  (robots: {', '.join(bundled_robot_names())})",
@@ -263,7 +271,18 @@ class RobotStateNode(LoopingNode):
         self.rejected_commands = 0
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
 
-        self._publish_description()
+        urdf_text = self._publish_description()
+        self.visuals = RobotVisuals(
+            self,
+            self.model,
+            urdf_text,
+            params["frame_prefix"],
+            params["tf_rate_hz"],
+            params["markers_rate_hz"],
+            params["trail_duration"],
+        )
+        self.visuals.publish_static(time.time_ns())
+        self.get_logger().info(self.visuals.tf_log)
         self.get_logger().info(
             f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, "
             f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
@@ -278,13 +297,10 @@ class RobotStateNode(LoopingNode):
             rate = params["diagnostics_rate_hz"]
             self._diagnostics_period_ns = int(1e9 / rate) if rate > 0 else 0
 
-    def _publish_description(self) -> None:
-        try:
-            from manip_kin.urdf import model_to_urdf
-        except ImportError as error:  # the exporter is optional for the simulation itself
-            self.get_logger().warning(f"robot_description not published: {error}")
-            return
-        self._description_pub.publish(String(data=model_to_urdf(self.model)))
+    def _publish_description(self) -> str:
+        urdf_text = model_to_urdf(self.model)
+        self._description_pub.publish(String(data=urdf_text))
+        return urdf_text
 
     def _take_commands(self, now_ns: int) -> None:
         dof = self.model.dof
@@ -331,6 +347,7 @@ class RobotStateNode(LoopingNode):
         self._tool_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.tool_values))
         self._ee_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.ee_twist_values))
         self._tool_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.tool_twist_values))
+        self.visuals.cycle(now_ns, stamp_ns, integrator.q_values, integrator.tool_values)
 
         if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
             self._last_diagnostics_ns = now_ns

@@ -21,5 +21,6 @@ PIPELINE_TOPIC_TYPES = {
     "ee_twist": "geometry_msgs/msg/TwistStamped",
     "tool_twist": "geometry_msgs/msg/TwistStamped",
     "robot_description": "std_msgs/msg/String",
+    "markers": "visualization_msgs/msg/MarkerArray",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }

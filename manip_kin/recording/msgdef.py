@@ -111,10 +111,23 @@ def find_interface_file(type_name: str, suffix: str = ".msg") -> Path:
     )
 
 
+# Definitions of types manip_kin writes without an installed package: ``tf2_msgs`` is not
+# on PyPI, yet every recording carries ``/tf``. The text is geometry2's ``TFMessage.msg``.
+BUNDLED_MSG_TEXTS = {
+    "tf2_msgs/msg/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+}
+
+
 @functools.cache
 def read_msg_text(type_name: str) -> str:
-    """The installed ``.msg`` text of a type, exactly as on disk."""
-    return find_interface_file(type_name, ".msg").read_text(encoding="utf-8")
+    """The installed ``.msg`` text of a type, exactly as on disk (else a bundled one, see above)."""
+    try:
+        return find_interface_file(type_name, ".msg").read_text(encoding="utf-8")
+    except MessageDefinitionError:
+        bundled = BUNDLED_MSG_TEXTS.get(normalize_type_name(type_name))
+        if bundled is None:
+            raise
+        return bundled
 
 
 def msg_dependencies(text: str, package: str) -> list[str]:
