@@ -132,7 +132,7 @@ def publish_load(rate_hz: float, duration_s: float, n_topics: int, depth: int = 
     """
     import rclpy
 
-    from manip_kin.recording.reader import message_class
+    from manip_kin.recording.messages import message_class
 
     rclpy.init(args=[])
     node = rclpy.create_node("recorder_bench_load")
@@ -193,7 +193,7 @@ def benchmark_recorder(rate_hz: float = 1000.0, duration_s: float = 8.0, n_topic
     import subprocess
     import sys
 
-    from manip_kin.recording.reader import read_info
+    from manip_kin.recording.info import read_info
 
     with tempfile.TemporaryDirectory(prefix="manip_kin_recbench_") as directory:
         output = Path(directory) / "load.mcap"

@@ -31,7 +31,7 @@ def iter_tf_poses(path: str | Path, root: str | None = None) -> Iterator[tuple[i
         root: frame to compose from; default: the parent that is nobody's child
             (``base_link`` for manip_kin's robots).
     """
-    from manip_kin.recording.reader import iter_raw_messages
+    from manip_kin.recording.messages import iter_raw_messages
 
     latest: dict[str, LinkTransform] = {}
     for raw in iter_raw_messages(path, topics=[TF_TOPIC, TF_STATIC_TOPIC]):
@@ -68,7 +68,7 @@ class ArmFrames:
 
 def load_arm_frames(path: str | Path) -> ArmFrames | None:
     """Every ``/tf`` instant of a recording as arrays; None when it has no ``/tf``."""
-    from manip_kin.recording.reader import iter_raw_messages
+    from manip_kin.recording.messages import iter_raw_messages
 
     samples = list(iter_tf_poses(path))
     if not samples:

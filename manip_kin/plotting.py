@@ -9,6 +9,11 @@
 * ``joint_positions.png``: every joint with its position limits
 * ``joint_rate_commands.png``: the joint-rate commands
 * ``path_3d.png``: the tool path against the planned line, and the arm at a few instants
+  (drawn from the recording's ``/tf`` when it has one, else from the model's kinematics)
+* ``arm_tf.png`` (recordings with ``/tf``): the arm at a few instants, from TF alone
+
+An animation of the arm (:func:`manip_kin.arm_animation.write_animation`) is ``manip_kin plot
+--gif`` / ``--mp4``.
 
 Times are seconds since the first message of the run (receive time).
 """
@@ -20,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from manip_kin.arm_animation import ArmFrames, draw_arm_picture, load_arm_frames
 from manip_kin.errors import ManipKinError
 from manip_kin.rotations import matrix_to_rotvec, quat_to_matrix
 
@@ -30,6 +36,18 @@ FIGURES = (
     "joint_positions.png",
     "joint_rate_commands.png",
     "path_3d.png",
+)
+TF_FIGURE = "arm_tf.png"
+_PLOTTED_TOPICS = (
+    "/joint_states",
+    "/joint_velocity_commands",
+    "/tool_pose",
+    "/ee_pose",
+    "/goal_pose",
+    "/tool_twist",
+    "/ee_twist",
+    "/planned_path",
+    "/robot_description",
 )
 
 
@@ -62,6 +80,7 @@ class RunData:
         tool, goal, ee: pose series; tool_twist, ee_twist: twist series.
         planned_paths: each planned line as positions, shape (K, 3).
         robot_description: the URDF published by robot_state ('' if not recorded).
+        arm: the frames of the recording's TF over time, or None without ``/tf``.
     """
 
     joint_names: list[str] = field(default_factory=list)
@@ -76,6 +95,7 @@ class RunData:
     ee_twist: TwistSeries = field(default_factory=TwistSeries)
     planned_paths: list[np.ndarray] = field(default_factory=list)
     robot_description: str = ""
+    arm: ArmFrames | None = None
 
 
 def _pose_series(samples: list[tuple[float, object]]) -> PoseSeries:
@@ -109,7 +129,7 @@ def load_run(path: str | Path, namespace: str = "") -> RunData:
     prefix = normalize_namespace(namespace)
 
     by_topic: dict[str, list[tuple[int, object]]] = {}
-    for topic, message, log_time_ns, _publish_ns in read_messages(path):
+    for topic, message, log_time_ns, _publish_ns in read_messages(path, topics=[prefix + t for t in _PLOTTED_TOPICS]):
         by_topic.setdefault(topic, []).append((log_time_ns, message))
     if not by_topic:
         raise ManipKinError(f"{path}: the recording holds no messages; nothing to plot")
@@ -144,6 +164,7 @@ def load_run(path: str | Path, namespace: str = "") -> RunData:
     descriptions = seconds("/robot_description")
     if descriptions:
         run.robot_description = descriptions[-1][1].data
+    run.arm = load_arm_frames(path)
     return run
 
 
@@ -285,7 +306,18 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     figure = plt.figure(figsize=(8, 7))
     axis = figure.add_subplot(projection="3d")
     drawn = []  # every plotted point, for equal axis scales
-    if model is not None and len(run.joint_time):
+    if run.arm is not None:
+        arm = run.arm
+        instants = np.unique(np.linspace(0, len(arm.time) - 1, 5).astype(int))
+        for k, sample in enumerate(instants):
+            shade = 0.2 + 0.6 * k / max(1, len(instants) - 1)
+            for e, (parent, child) in enumerate(arm.edges):
+                segment = arm.positions[sample, [parent, child]]
+                label = f"arm (/tf) at t = {arm.time[sample]:.1f} s" if e == 0 else None
+                axis.plot(*segment.T, color=(shade, shade, shade), linewidth=1.5, label=label)
+            axis.plot(*arm.positions[sample].T, linestyle="", marker="o", markersize=3, color=(shade, shade, shade))
+            drawn.append(arm.positions[sample])
+    elif model is not None and len(run.joint_time):
         from manip_kin.kinematics import frame_poses
 
         instants = np.unique(np.linspace(0, len(run.joint_time) - 1, 5).astype(int))
@@ -326,4 +358,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     axis.set_title(f"{prefix}tool path, planned line and arm (base frame)")
     axis.legend(loc="upper left", fontsize="small")
     save(figure, "path_3d.png")
+
+    if run.arm is not None:
+        written.append(draw_arm_picture(run.arm, out_dir / TF_FIGURE, title=f"{prefix}arm from /tf"))
     return written

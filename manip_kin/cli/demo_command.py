@@ -5,7 +5,7 @@
 3. live pipeline: robot_state, cartesian_controller, trajectory_generator and the recorder as
    separate processes on loopback DDS; the pose goal, then a straight line back to a second
    target (the start tool pose);
-4. the recording: ``manip_kin info`` of it and its plots.
+4. the recording: ``manip_kin info`` of it, its plots and an animation of the arm from its /tf.
 """
 
 from __future__ import annotations
@@ -189,6 +189,15 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     from manip_kin.recording import read_info
 
     print(read_info(out).to_text())
-    figures = plot_run(load_run(out, namespace=namespace), out.parent / f"{out.stem}_plots", title="genova7 demo")
+    run = load_run(out, namespace=namespace)
+    plots_dir = out.parent / f"{out.stem}_plots"
+    figures = plot_run(run, plots_dir, title="genova7 demo")
     print(f"plots: {', '.join(str(p) for p in figures)}")
+    if run.arm is not None:
+        from manip_kin.arm_animation import write_animation
+
+        print(f"animation of the arm from /tf: {write_animation(run.arm, plots_dir / 'arm.gif', title='genova7 demo')}")
+    else:
+        print("no /tf in the recording: no animation", file=sys.stderr)
+        exit_code = exit_code or 1
     return exit_code

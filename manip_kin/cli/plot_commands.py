@@ -1,4 +1,4 @@
-"""``manip_kin plot FILE [--out DIR]``: PNG figures of a recorded run."""
+"""``manip_kin plot FILE [--out DIR] [--gif|--mp4 [OUT]]``: PNG figures and an animation of a recorded run."""
 
 from __future__ import annotations
 
@@ -27,6 +27,21 @@ def register(subparsers) -> None:
         metavar="NS",
         help="plot the pipeline recorded in namespace NS (/NS/joint_states...; default: the root namespace)",
     )
+    animation = parser.add_mutually_exclusive_group()
+    animation.add_argument(
+        "--gif",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="OUT",
+        help="also write an animation of the arm from the recording's /tf (default OUT: DIR/arm.gif)",
+    )
+    animation.add_argument(
+        "--mp4", nargs="?", const="", default=None, metavar="OUT", help="as --gif, as MP4 (needs ffmpeg on PATH)"
+    )
+    parser.add_argument(
+        "--frames", type=int, default=150, metavar="N", help="animation frames, evenly spread over the run (150)"
+    )
     parser.set_defaults(run=run_plot)
 
 
@@ -38,4 +53,18 @@ def run_plot(args: argparse.Namespace) -> int:
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} figures to {out_dir}", file=sys.stderr)
+    kind = "gif" if args.gif is not None else "mp4" if args.mp4 is not None else None
+    if kind is not None:
+        from manip_kin.arm_animation import write_animation
+        from manip_kin.errors import InvalidArgumentError
+
+        if run.arm is None:
+            raise InvalidArgumentError(
+                f"{source} has no /tf to animate; add it with `manip_kin info --add-tf OUT {source}`"
+            )
+        if args.frames < 2:
+            raise InvalidArgumentError(f"--frames {args.frames}; valid: 2 or more")
+        target = Path((args.gif if kind == "gif" else args.mp4) or out_dir / f"arm.{kind}")
+        print(f"animating {min(args.frames, len(run.arm.time))} frames ...", file=sys.stderr, flush=True)
+        print(write_animation(run.arm, target, max_frames=args.frames, title=args.title or source.stem))
     return 0

@@ -25,6 +25,16 @@ def register(subparsers) -> None:
         default=None,
         help="write the readable part of FILE to OUT (.mcap file or new bag directory) and report it",
     )
+    info.add_argument(
+        "--add-tf",
+        metavar="OUT",
+        default=None,
+        help="write a copy of FILE to OUT with /tf and /tf_static computed from its joint_states and "
+        "robot_description (for recordings made before the recorder wrote TF)",
+    )
+    info.add_argument(
+        "--tf-rate", type=float, default=50.0, metavar="HZ", help="rate of the added /tf [Hz] (default 50)"
+    )
     info.add_argument("--json", action="store_true", help="print one JSON object on stdout and nothing else there")
     info.set_defaults(run=run_info)
 
@@ -34,7 +44,8 @@ def register(subparsers) -> None:
         description=(
             "Republish the messages of a recording in receive-time order, with the recorded "
             "spacing divided by --rate, on publishers offering the recorded QoS. A progress "
-            "line goes to stderr. Ctrl-C stops."
+            "line goes to stderr. Ctrl-C stops. Topics whose type has no Python class here "
+            "(tf2_msgs on a PyPI-only machine) are left out with a note, unless named in --topics."
         ),
     )
     replay.add_argument("file", metavar="FILE", help="a .mcap file or a bag directory")
@@ -76,6 +87,12 @@ def register(subparsers) -> None:
         "whatever namespace they were recorded in (e.g. /left/joint_states -> /right/joint_states); "
         "--remap wins for the topics it names",
     )
+    replay.add_argument(
+        "--add-tf",
+        action="store_true",
+        help="also publish /tf and /tf_static computed from the replayed joint_states and robot_description "
+        "(for recordings without TF; needs tf2_msgs, else use `manip_kin info --add-tf OUT FILE`)",
+    )
     replay.add_argument("--quiet", action="store_true", help="no progress line")
     replay.set_defaults(run=run_replay)
 
@@ -87,8 +104,21 @@ def _print_json(document: dict) -> None:
 
 def run_info(args: argparse.Namespace) -> int:
     """``manip_kin info``."""
-    from manip_kin.recording.reader import read_info, salvage
+    from manip_kin.recording.errors import RecordingError
+    from manip_kin.recording.info import read_info
+    from manip_kin.recording.salvage import salvage
 
+    if args.add_tf is not None:
+        from manip_kin.recording.tf_synthesis import add_tf
+
+        if args.salvage is not None:
+            raise RecordingError("--add-tf and --salvage are separate steps: salvage first, then add TF")
+        summary, status = add_tf(args.file, args.add_tf, rate_hz=args.tf_rate)
+        if args.json:
+            _print_json({"output": str(summary.path), "topic_counts": summary.topic_counts, "tf": status})
+        else:
+            print(f"{summary.one_line()}; {status}")
+        return 0
     if args.salvage is not None:
         report = salvage(args.file, args.salvage)
         if args.json:
@@ -119,6 +149,7 @@ def run_replay(args: argparse.Namespace) -> int:
         start_offset_s=args.start_offset,
         clock=args.clock,
         wait_for_subscribers_s=max(0.0, args.wait_for_subscribers),
+        add_tf=args.add_tf,
     )
     report = replay(args.file, options, progress=None if args.quiet else sys.stderr)
     print(

@@ -38,8 +38,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
+from manip_kin.recording.messages import message_class
 from manip_kin.recording.qos import OfferedProfiles, default_offer
-from manip_kin.recording.reader import message_class
 from manip_kin.recording.tf_synthesis import DEFAULT_TF_RATE_HZ, TF_TOPICS, TfSynthesizer, write_tf
 from manip_kin.recording.writer import COMPRESSION_CHOICES, RecordingWriter
 

@@ -25,6 +25,7 @@ from manip_kin import markers as core
 from manip_kin.model import RobotModel
 from manip_kin.nodes.conversions import ns_to_stamp, pose_to_matrix
 from manip_kin.nodes.rate_loop import PolledSubscription
+from manip_kin.recording import tf_message
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, encode_tf_message
 from manip_kin.tf_tree import LinkTree, StampDecimator, moving_transforms, static_transforms
 
@@ -36,15 +37,6 @@ PATH_COLOUR = (0.1, 0.8, 0.9, 1.0)
 TRAIL_COLOUR = (0.9, 0.3, 0.9, 1.0)
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def tf_message_class():
-    """``tf2_msgs.msg.TFMessage`` where it imports (a ROS install), else None."""
-    try:
-        from tf2_msgs.msg import TFMessage
-    except ImportError:
-        return None
-    return TFMessage
 
 
 def _colour(rgba) -> ColorRGBA:
@@ -89,7 +81,7 @@ class RobotVisuals:
         self._tf_decimator = StampDecimator(tf_rate_hz)
         self._tf_pub = None
         self.tf_live = False
-        tf_class = tf_message_class()
+        tf_class = tf_message.tf_message_class()
         if tf_class is not None:
             self._tf_pub = node.create_publisher(tf_class, TF_TOPIC, 100)
             self._static_pub = node.create_publisher(tf_class, TF_STATIC_TOPIC, LATCHED)

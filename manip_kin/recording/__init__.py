@@ -11,15 +11,9 @@ The recorder node is :mod:`manip_kin.nodes.recorder`.
 """
 
 from manip_kin.recording.errors import CorruptRecordingError, MessageDefinitionError, RecordingError
-from manip_kin.recording.reader import (
-    RecordedMessage,
-    RecordingInfo,
-    SalvageReport,
-    iter_raw_messages,
-    read_info,
-    read_messages,
-    salvage,
-)
+from manip_kin.recording.info import RecordingInfo, read_info
+from manip_kin.recording.messages import RecordedMessage, iter_raw_messages, read_messages
+from manip_kin.recording.salvage import SalvageReport, salvage
 from manip_kin.recording.writer import RecordingSummary, RecordingWriter
 
 __all__ = [

@@ -14,8 +14,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from manip_kin.recording.qos import OfferedProfiles
-from manip_kin.recording.yaml_emit import dump
+from manip_kin.recording.qos import OfferedProfiles, yaml_text
 
 BAG_METADATA_VERSION = 9
 STORAGE_IDENTIFIER = "mcap"
@@ -102,10 +101,10 @@ def bag_metadata(
 
 
 def serialized_metadata(metadata: dict) -> str:
-    """The ``serialized_metadata`` value (``YAML::Dump`` of the BagMetadata node)."""
-    return dump(metadata)
+    """The ``serialized_metadata`` value (the BagMetadata mapping as YAML)."""
+    return yaml_text(metadata)
 
 
 def metadata_yaml(metadata: dict) -> str:
     """The ``metadata.yaml`` text of a bag directory."""
-    return dump({"rosbag2_bagfile_information": metadata}) + "\n"
+    return yaml_text({"rosbag2_bagfile_information": metadata}) + "\n"

@@ -15,9 +15,15 @@ from typing import Any
 import yaml
 
 from manip_kin.recording.errors import RecordingError
-from manip_kin.recording.yaml_emit import dump
 
 NS_PER_S = 1_000_000_000
+
+
+def yaml_text(value: object) -> str:
+    """Block-style YAML of ``value``, keys in their order, no trailing newline (any YAML reader takes it)."""
+    return yaml.safe_dump(value, sort_keys=False, default_flow_style=False, allow_unicode=True).rstrip("\n")
+
+
 RMW_DURATION_INFINITE_NS = 2**63 - 1
 
 # Enum integer → rmw name, per rmw/types.h (the integers are those of version ≤ 8 files).
@@ -124,7 +130,7 @@ class OfferedProfiles:
 
     def to_yaml(self) -> str:
         """The ``offered_qos_profiles`` channel metadata string (``YAML::Dump`` layout)."""
-        return dump([p.to_dict() for p in self.profiles])
+        return yaml_text([p.to_dict() for p in self.profiles])
 
     def to_list(self) -> list[dict[str, Any]]:
         """The list written into ``metadata.yaml`` (version 9 stores it as YAML, not a string)."""

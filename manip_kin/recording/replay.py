@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from manip_kin.recording.errors import RecordingError
-from manip_kin.recording.reader import iter_raw_messages, message_class, read_info
+from manip_kin.recording.info import read_info
+from manip_kin.recording.messages import iter_raw_messages, message_class
 
 NS_PER_S = 1_000_000_000
 VOLATILE_MIN_DEPTH = 100  # a replay burst must not overwrite unacknowledged reliable samples
@@ -43,6 +44,8 @@ class ReplayOptions:
         wait_for_subscribers_s: before the first message, wait up to this long
             for every publisher to be matched by a subscriber (discovery takes
             a moment; without it the first messages reach nobody).
+        add_tf: also publish ``/tf`` and ``/tf_static`` computed from the replayed joint
+            states and robot description (:mod:`.tf_synthesis`); needs ``tf2_msgs``.
     """
 
     rate: float = 1.0
@@ -52,6 +55,7 @@ class ReplayOptions:
     start_offset_s: float = 0.0
     clock: bool = False
     wait_for_subscribers_s: float = 1.0
+    add_tf: bool = False
 
 
 @dataclass
@@ -152,7 +156,25 @@ def replay(
         raise RecordingError(
             f"--start-offset {options.start_offset_s} s is past the end of the recording ({info.duration_s:.3f} s long)"
         )
+    if options.topics is None:
+        # Everything that can be published here: a type without a Python class (tf2_msgs on a
+        # PyPI-only machine) is left out with a note; named in --topics, it is an error.
+        without_class = [name for name in selected if not _has_class(recorded[name].type)]
+        if without_class and progress is not None:
+            kinds = ", ".join(f"{name} ({recorded[name].type})" for name in without_class)
+            progress.write(f"replay: not publishing {kinds}: no Python class for the type here\n")
+        selected = [name for name in selected if name not in without_class]
     classes = {name: message_class(recorded[name].type) for name in selected}
+    tf_class = None
+    if options.add_tf:
+        from manip_kin.recording.tf_message import tf_message_class
+
+        tf_class = tf_message_class()
+        if tf_class is None:
+            raise RecordingError(
+                "--add-tf publishes /tf live and needs tf2_msgs (a ROS install); here, write a copy "
+                f"with TF instead: manip_kin info --add-tf OUT {path}"
+            )
 
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -171,6 +193,9 @@ def replay(
             publishers[name] = node.create_publisher(
                 classes[name], options.remaps.get(name, name), offered.replay_profile(minimum_depth)
             )
+        on_published = None
+        if tf_class is not None:
+            on_published = _tf_publisher(node, tf_class, "/tf" in recorded, progress)
         clock_publisher = None
         clock_class = None
         if options.clock:
@@ -185,7 +210,9 @@ def replay(
                 f"replay: no subscriber after {options.wait_for_subscribers_s:g} s on {' '.join(unmatched)}; "
                 "publishing anyway\n"
             )
-        report = _play(path, info, options, selected, publishers, clock_publisher, clock_class, progress, should_stop)
+        report = _play(
+            path, info, options, selected, publishers, clock_publisher, clock_class, progress, should_stop, on_published
+        )
         for publisher in publishers.values():
             # Reliable samples still in flight would be lost if the process exited now. Fast DDS
             # learns of acks only at its heartbeat period (seconds), so the wait is kept short:
@@ -230,6 +257,7 @@ def _play(
     clock_class: Any,
     progress_stream: TextIO | None,
     should_stop: Callable[[], bool],
+    on_published: Callable[[Any], None] | None = None,
 ) -> ReplayReport:
     report = ReplayReport()
     begin_ns = info.start_ns + int(options.start_offset_s * NS_PER_S)
@@ -269,6 +297,8 @@ def _play(
                 time.sleep(min(target - now, CLOCK_PERIOD_S if clock_publisher else 0.05))
             publish_clock(raw.log_time_ns)
             publishers[raw.topic].publish(raw.data)
+            if on_published is not None:
+                on_published(raw)
             last_wall = time.monotonic()
             if first_wall is None:
                 first_wall = last_wall
@@ -283,3 +313,36 @@ def _play(
         report.wall_duration_s = last_wall - first_wall
     progress.finish(position_s, report.messages_published)
     return report
+
+
+def _has_class(type_name: str) -> bool:
+    try:
+        message_class(type_name)
+    except RecordingError:
+        return False
+    return True
+
+
+def _tf_publisher(node: Any, tf_class: type, recorded_tf: bool, progress: TextIO | None):
+    """A callback publishing the TF synthesised from each replayed message (None if the file has /tf)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC
+    from manip_kin.recording.tf_synthesis import TfSynthesizer
+
+    if recorded_tf:
+        if progress is not None:
+            progress.write("replay: the recording has /tf; --add-tf adds nothing\n")
+        return None
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+    publishers = {
+        TF_TOPIC: node.create_publisher(tf_class, TF_TOPIC, 100),
+        TF_STATIC_TOPIC: node.create_publisher(tf_class, TF_STATIC_TOPIC, latched),
+    }
+    synthesizer = TfSynthesizer()
+
+    def publish(raw: Any) -> None:
+        for out in synthesizer.feed(raw.topic, raw.type, raw.data, raw.log_time_ns):
+            publishers[out.topic].publish(out.data)
+
+    return publish

@@ -26,6 +26,15 @@ _STAMP = struct.Struct("<iI")
 _SEVEN_DOUBLES = struct.Struct("<7d")
 
 
+def tf_message_class():
+    """``tf2_msgs.msg.TFMessage`` where it imports (a ROS install), else None."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        return None
+    return TFMessage
+
+
 def tf_offer(static: bool) -> OfferedProfiles:
     """What tf2_ros's broadcasters offer: ``/tf`` reliable, volatile, depth 100;
     ``/tf_static`` reliable, transient local, depth 1."""

@@ -158,7 +158,9 @@ def add_tf(source: str | Path, output: str | Path, rate_hz: float = DEFAULT_TF_R
     Raises:
         RecordingError: ``output`` is the source, or the source is unreadable.
     """
-    from manip_kin.recording.reader import iter_raw_messages, read_info, recording_files
+    from manip_kin.recording.files import recording_files
+    from manip_kin.recording.info import read_info
+    from manip_kin.recording.messages import iter_raw_messages
     from manip_kin.recording.writer import RecordingWriter
 
     source, output = Path(source), Path(output)

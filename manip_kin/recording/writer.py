@@ -6,7 +6,7 @@ One file per recording. The output is either a single ``.mcap`` file (needs no
 
 Durability: chunks are small and finished at least every ``flush_interval_s``
 seconds and handed to the OS, so a SIGKILL loses at most about that much; the
-salvage reader (:func:`manip_kin.recording.reader.salvage`) recovers the rest.
+salvage reader (:func:`manip_kin.recording.salvage.salvage`) recovers the rest.
 :meth:`RecordingWriter.close` writes the summary and footer that make the
 file complete (and the ``rosbag2`` metadata record and ``metadata.yaml``).
 """
