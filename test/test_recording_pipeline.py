@@ -19,8 +19,8 @@ from pipeline_checks import checked_pipeline
 from sensor_msgs.msg import JointState
 
 from manip_kin.pipeline import NodeProcess, pipeline_processes
-from manip_kin.plotting import FIGURES, load_run, tracking_errors
-from manip_kin.recording import read_messages
+from manip_kin.plotting import FIGURES, TF_FIGURE, load_run, tracking_errors
+from manip_kin.recording import read_info, read_messages
 from manip_kin.rotations import make_transform, rpy_to_matrix
 
 MANIP_KIN = Path(sysconfig.get_path("scripts")) / "manip_kin"
@@ -204,7 +204,7 @@ def test_plot_writes_every_figure_from_the_recorded_run(recorded_run, tmp_path):
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    assert _figures_in(tmp_path / "plots") == set(FIGURES)
+    assert _figures_in(tmp_path / "plots") == set(FIGURES) | {TF_FIGURE}  # the recorder wrote /tf
 
 
 def test_replayed_and_re_recorded_run_plots_too(recorded_run, tmp_path):
@@ -240,4 +240,31 @@ def test_replayed_and_re_recorded_run_plots_too(recorded_run, tmp_path):
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    assert _figures_in(tmp_path / "plots") == set(FIGURES)
+    assert _figures_in(tmp_path / "plots") == set(FIGURES) | {TF_FIGURE}  # the recorder wrote /tf
+
+
+def test_recording_without_live_tf_gains_tf_that_composes_to_the_tool_pose(recorded_run):
+    """No node publishes /tf here (no tf2_msgs): the recorder synthesised it; rosbags reads it."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    from manip_kin.arm_animation import iter_tf_poses
+
+    path, _, _, summary = recorded_run
+    assert "/tf synthesised from joint_states" in summary, summary
+    counts = {t.name: t.message_count for t in read_info(path).topics}
+    assert counts["/tf"] > 20 and counts["/tf_static"] == 1 and counts["/markers"] > 5
+    tool = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        wanted = [c for c in reader.connections if c.topic in ("/tf", "/tf_static", "/markers", "/tool_pose")]
+        for connection, _timestamp, raw in reader.messages(connections=wanted):
+            message = reader.deserialize(raw, connection.msgtype)  # every message decodes
+            if connection.topic == "/tool_pose":
+                p = message.pose.position
+                tool[message.header.stamp.sec * 10**9 + message.header.stamp.nanosec] = np.array([p.x, p.y, p.z])
+    matched = 0
+    for stamp, _log, poses in iter_tf_poses(path, root="base_link"):
+        if stamp in tool:
+            matched += 1
+            np.testing.assert_allclose(poses["tool"][:3, 3], tool[stamp], atol=1e-12)
+    assert matched > 20
