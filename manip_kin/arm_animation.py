@@ -93,7 +93,15 @@ def load_arm_frames(path: str | Path) -> ArmFrames | None:
     )
 
 
+# Seen from the side and slightly above: genova7 and the others reach out along y, where the
+# default view (elevation 30°, azimuth -60°) foreshortens the arm.
+VIEW_ELEVATION_DEG = 15.0
+VIEW_AZIMUTH_DEG = -15.0
+
+
 def _equal_limits(axis, points: np.ndarray) -> None:
+    axis.view_init(elev=VIEW_ELEVATION_DEG, azim=VIEW_AZIMUTH_DEG)
+    axis.set_proj_type("ortho")  # no perspective: heights read true against the z axis
     centre = (points.max(axis=0) + points.min(axis=0)) / 2
     half = max(float((points.max(axis=0) - points.min(axis=0)).max()) / 2, 0.05)
     axis.set_xlim(centre[0] - half, centre[0] + half)

@@ -268,3 +268,16 @@ def test_recording_without_live_tf_gains_tf_that_composes_to_the_tool_pose(recor
             matched += 1
             np.testing.assert_allclose(poses["tool"][:3, 3], tool[stamp], atol=1e-12)
     assert matched > 20
+
+
+def test_foxglove_layout_names_only_recorded_topics(recorded_run):
+    import json
+
+    layout = json.loads((Path(__file__).resolve().parents[1] / "config" / "foxglove_layout.json").read_text())
+    recorded = {t.name for t in read_info(recorded_run[0]).topics}
+    panels = layout["configById"]
+    used = set(panels["3D!arm"]["topics"])
+    for panel in panels.values():
+        used |= {path["value"].split(".")[0] for path in panel.get("paths", [])}
+    assert used and used <= recorded, used - recorded
+    assert {"/tf", "/tf_static", "/robot_description", "/markers"} <= recorded
