@@ -189,9 +189,6 @@ class RecorderNode(Node):
         )
         if not tf_rate_hz > 0:
             raise RecordingError(f"parameter tf_rate_hz is {tf_rate_hz}; valid: a positive rate [Hz]")
-        # TF from the recorded joint states until a live /tf is recorded (see _discover).
-        self._tf: TfSynthesizer | None = TfSynthesizer(tf_rate_hz, frame_prefix)
-        self._tf_note = ""
         if compression not in COMPRESSION_CHOICES:
             raise RecordingError(f"parameter compression is {compression!r}; valid: {', '.join(COMPRESSION_CHOICES)}")
         if self._duration_s < 0 or self._max_messages < 0:
@@ -202,6 +199,10 @@ class RecorderNode(Node):
         if not self._all_topics and not topics:
             raise RecordingError("parameter topics is empty and all_topics is false: nothing to record")
         self._wanted = {self.resolve_topic_name(t) for t in topics}
+        # TF from the recorded joint states, unless /tf is not wanted or a live /tf is recorded (_discover).
+        wants_tf = self._all_topics or "/tf" in self._wanted
+        self._tf: TfSynthesizer | None = TfSynthesizer(tf_rate_hz, frame_prefix) if wants_tf else None
+        self._tf_note = "" if wants_tf else "no /tf synthesised: /tf is not among the topics"
         if output.endswith(".mcap") and Path(output).is_file():
             self.get_logger().warning(f"overwriting the existing recording {output}")
         self._writer = RecordingWriter(output, compression=compression)
