@@ -81,7 +81,8 @@ def test_markers_show_the_goal_and_path_that_were_sent(harness):
         return {"goal", "planned_path"} <= names
 
     assert harness.spin_until(has_both, timeout=10.0, every=lambda: harness.publish("goal_pose", goal), period=0.05)
-    latest = {m.ns: m for m in received[-1].markers}
+    latest = {(m.ns, m.id): m for array in received for m in array.markers}  # newest per marker
+    latest.update({m.ns: m for m in latest.values() if m.id == 0})
     axes = latest["goal"]
     assert axes.type == Marker.LINE_LIST and axes.header.frame_id == "base_link"
     points = np.array([[p.x, p.y, p.z] for p in axes.points])
@@ -93,7 +94,7 @@ def test_markers_show_the_goal_and_path_that_were_sent(harness):
     assert strip.type == Marker.LINE_STRIP
     np.testing.assert_allclose([[p.x, p.y, p.z] for p in strip.points], line, atol=1e-15)
     # One sphere per joint on its link frame, coloured by the limit state of the current q.
-    spheres = sorted((m for m in received[-1].markers if m.ns == "joint_limits"), key=lambda m: m.id)
+    spheres = [latest[("joint_limits", i)] for i in range(7)]
     assert [m.header.frame_id for m in spheres] == [f"link{i}" for i in range(1, 8)]
     model = node.model
     expected = markers.limit_colours(node.integrator.q, model.lower, model.upper)

@@ -13,7 +13,12 @@ here (40% of a core for 1 kHz of joint states alone). The intake thread
 instead drains every subscription's queue every few milliseconds; each message
 costs a take (~2 µs) and a write (~8 µs). The receive time recorded is the
 middleware's reception timestamp, so the polling delay does not show in the
-file's timing.
+file's timing. The subscriptions are :class:`~manip_kin.nodes.raw_intake.RawSubscription` s:
+the one module that touches rclpy internals, with a public-API fallback.
+
+TF: unless a node publishes ``/tf`` (then it is recorded as it is), the recorder writes
+``/tf`` and ``/tf_static`` itself from the recorded ``joint_states`` and
+``robot_description`` (:mod:`manip_kin.recording.tf_synthesis`).
 
 Drops: DDS reports samples it knows it lost (message-lost events), and each
 sample carries its publisher's sequence number, so on a topic with a single
@@ -35,6 +40,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from manip_kin.nodes.raw_intake import RawSubscription, fast_path_problem
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
@@ -120,8 +126,7 @@ class _RawTopic:
     name: str
     type_name: str
     message_type: type
-    handle: Any
-    lost_event: Any  # message-lost event handle, or None when the middleware has none
+    intake: RawSubscription
     last_sequence: int | None = None
     sequence_gaps: int = 0
     middleware_lost: int = 0
@@ -223,6 +228,12 @@ class RecorderNode(Node):
         self.create_timer(FLUSH_CHECK_PERIOD_S, self._flush_if_due)
         if self._duration_s > 0:
             self._duration_timer = self.create_timer(self._duration_s, self._on_duration)
+        problem = fast_path_problem()
+        self.get_logger().info(
+            "intake: the intake thread takes messages from the middleware"
+            if not problem
+            else f"intake: public rclpy API, messages through the executor ({problem})"
+        )
         self._intake = threading.Thread(target=self._intake_loop, name="recorder_intake", daemon=True)
         self._intake.start()
         what = "all topics" if self._all_topics else " ".join(sorted(self._wanted))
@@ -264,10 +275,6 @@ class RecorderNode(Node):
 
     def _subscribe(self, topic: str, publishers: list, types: list[str]) -> None:
         """Subscribe to ``topic``; with no ``publishers`` yet, as manip_kin's nodes publish it."""
-        from rclpy.event_handler import QoSSubscriptionEventType
-        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-        from rclpy.type_support import check_is_valid_msg_type
-
         type_name = publishers[0].topic_type if publishers else types[0]
         if len({p.topic_type for p in publishers}) > 1 or len(types) > 1:
             self.get_logger().warning(
@@ -293,20 +300,12 @@ class RecorderNode(Node):
                 reliability=ReliabilityPolicy.RELIABLE,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
             )
-        check_is_valid_msg_type(message_type)
-        with self.handle:
-            handle = _rclpy.Subscription(self.handle, message_type, topic, qos.get_c_qos_profile())
-        try:
-            # Polled by the intake thread: as an executor waitable it kept the executor busy.
-            lost_event = _rclpy.EventHandle(handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
-        except _rclpy.UnsupportedEventTypeError:
-            lost_event = None
+        intake = RawSubscription(self, message_type, topic, qos)
         entry = _RawTopic(
             topic,
             type_name,
             message_type,
-            handle,
-            lost_event,
+            intake,
             single_publisher=len(publishers) <= 1,
             presubscribed=not publishers,
         )
@@ -337,9 +336,7 @@ class RecorderNode(Node):
         """Replace a pre-subscription by one whose QoS matches the publishers found."""
         with self._lock:
             del self._topics[entry.name]
-        if entry.lost_event is not None:
-            entry.lost_event.destroy_when_not_in_use()
-        entry.handle.destroy_when_not_in_use()
+        entry.intake.destroy(self)
         self._subscribe(entry.name, publishers, types)
 
     def _flush_if_due(self) -> None:
@@ -375,12 +372,7 @@ class RecorderNode(Node):
         with self._lock:
             entries = list(self._topics.values())
         for entry in entries:
-            if entry.lost_event is None:
-                continue
-            with entry.lost_event:
-                status = entry.lost_event.take_event()
-            if status is not None:
-                entry.middleware_lost += int(status.total_count_change)
+            entry.middleware_lost += entry.intake.take_lost()
 
     def _drain(self) -> None:
         """Take every queued message of every topic and write it."""
@@ -388,8 +380,7 @@ class RecorderNode(Node):
             entries = list(self._topics.values())
         for entry in entries:
             while True:
-                with entry.handle:
-                    taken = entry.handle.take_message(entry.message_type, True)
+                taken = entry.intake.take()
                 if taken is None:
                     break
                 data, info = taken
@@ -446,9 +437,7 @@ class RecorderNode(Node):
         self._drain()  # messages that arrived before the signal are part of the run
         self._take_lost_events()
         for entry in self._topics.values():
-            if entry.lost_event is not None:
-                entry.lost_event.destroy_when_not_in_use()
-            entry.handle.destroy_when_not_in_use()
+            entry.intake.destroy(self)
         with self._lock:
             summary = self._writer.close()
             dropped = self.dropped_messages()

@@ -11,6 +11,8 @@ Markers (``visualization_msgs/MarkerArray``, namespaces): ``goal`` the latest go
 axes (LINE_LIST), ``planned_path`` the latest planned path (LINE_STRIP), ``tool_trail``
 the tool positions of the last ``trail_duration`` seconds (LINE_STRIP), ``joint_limits``
 a sphere per movable joint at its link, green when free, amber to red near a limit.
+Each namespace goes out in its own MarkerArray, one per loop cycle, so that no cycle
+builds them all.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ JOINT_SPHERE_DIAMETER = 0.08  # [m]
 TRAIL_SPACING_S = 0.05
 PATH_COLOUR = (0.1, 0.8, 0.9, 1.0)
 TRAIL_COLOUR = (0.9, 0.3, 0.9, 1.0)
+MARKER_GROUPS = ("goal", "planned_path", "tool_trail", "joint_limits")  # marker namespaces
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -94,6 +97,7 @@ class RobotVisuals:
             )
         self._markers_period_ns = int(1e9 / markers_rate_hz) if markers_rate_hz > 0 else 0
         self._last_markers_ns = 0
+        self._pending_groups: list[str] = []
         self._trail = core.ToolTrail(trail_duration_s, TRAIL_SPACING_S)
         self._goal: PoseStamped | None = None
         self._path: Path | None = None
@@ -118,7 +122,13 @@ class RobotVisuals:
         if now_ns - self._last_markers_ns >= self._markers_period_ns:
             self._last_markers_ns = now_ns
             self._take_inputs()
-            self._markers_pub.publish(self.marker_array(stamp_ns, q_values))
+            self._pending_groups = list(MARKER_GROUPS)
+        # One group per cycle: building all of them at once (~1 ms) would stall a 1 kHz loop.
+        while self._pending_groups:
+            array = self.marker_array(stamp_ns, q_values, (self._pending_groups.pop(0),))
+            if array.markers:
+                self._markers_pub.publish(array)
+                break
 
     def _take_inputs(self) -> None:
         while (goal := self._goal_sub.take()) is not None:
@@ -126,8 +136,8 @@ class RobotVisuals:
         while (path := self._path_sub.take()) is not None:
             self._path = path
 
-    def marker_array(self, stamp_ns: int, q_values) -> MarkerArray:
-        """The markers for the current goal, path, trail and joint positions."""
+    def marker_array(self, stamp_ns: int, q_values, groups=MARKER_GROUPS) -> MarkerArray:
+        """The markers of ``groups`` (namespaces) for the current goal, path, trail and joint positions."""
         stamp = ns_to_stamp(stamp_ns)
         markers = []
 
@@ -139,19 +149,21 @@ class RobotVisuals:
             markers.append(m)
             return m
 
-        if self._goal is not None:
+        if self._goal is not None and "goal" in groups:
             points, colours = core.axes_segments(pose_to_matrix(self._goal.pose), GOAL_AXIS_LENGTH)
             m = marker("goal", 0, Marker.LINE_LIST, self._goal.header.frame_id)
             m.points, m.colors = _points(points), [_colour(c) for c in colours]
             m.color = _colour(colours[0])
-        if self._path is not None and self._path.poses:
+        if self._path is not None and self._path.poses and "planned_path" in groups:
             m = marker("planned_path", 0, Marker.LINE_STRIP, self._path.header.frame_id)
             p = [pose.pose.position for pose in self._path.poses]
             m.points, m.color = _points((q.x, q.y, q.z) for q in p), _colour(PATH_COLOUR)
-        trail = self._trail.positions()
+        trail = self._trail.positions() if "tool_trail" in groups else ()
         if len(trail) >= 2:
             m = marker("tool_trail", 0, Marker.LINE_STRIP, self.root_frame)
             m.points, m.color = _points(trail), _colour(TRAIL_COLOUR)
+        if "joint_limits" not in groups:
+            return MarkerArray(markers=markers)
         colours = core.limit_colours(q_values, self.model.lower, self.model.upper)
         for i, frame in enumerate(self._joint_frames):
             m = marker("joint_limits", i, Marker.SPHERE, frame)

@@ -1,0 +1,91 @@
+"""The recorder's two intake paths (manip_kin.nodes.raw_intake) record the same thing.
+
+The fast path (the intake thread takes from the middleware, rclpy internals) is what every
+other recorder test runs; here the recorder runs both ways as a subprocess —
+``MANIP_KIN_PUBLIC_RCLPY=1`` forces the public API (executor callbacks) — and each file
+must hold every message published, with its values and stamps, read back by rosbags.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+from sensor_msgs.msg import JointState
+
+from manip_kin.nodes.conversions import ns_to_stamp
+from manip_kin.nodes.raw_intake import fast_path_problem
+
+RECORDER = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "recorder"
+PUBLISHED = 300
+
+
+@pytest.fixture
+def ros():
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node(f"intake_test_{time.monotonic_ns()}", context=context)
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_fast_path_is_used_on_the_checked_rclpy():
+    assert fast_path_problem() == ""
+    os.environ["MANIP_KIN_PUBLIC_RCLPY"] = "1"
+    try:
+        assert "MANIP_KIN_PUBLIC_RCLPY" in fast_path_problem()
+    finally:
+        del os.environ["MANIP_KIN_PUBLIC_RCLPY"]
+
+
+@pytest.mark.parametrize("public", [False, True], ids=["fast", "public-api"])
+def test_both_intake_paths_record_every_message(ros, tmp_path, public):
+    env = dict(os.environ)
+    if public:
+        env["MANIP_KIN_PUBLIC_RCLPY"] = "1"
+    output = tmp_path / "run.mcap"
+    recorder = subprocess.Popen(
+        [str(RECORDER), "--ros-args", "-p", f"output:={output}", "-p", "topics:=[/joint_states]"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        publisher = ros.create_publisher(JointState, "/joint_states", 100)
+        deadline = time.monotonic() + 20
+        while publisher.get_subscription_count() == 0:
+            assert recorder.poll() is None and time.monotonic() < deadline, "the recorder never subscribed"
+            time.sleep(0.05)
+        time.sleep(0.3)
+        stamps = []
+        for i in range(PUBLISHED):
+            message = JointState(name=["j"], position=[float(i)])
+            stamps.append(1_700_000_000_000_000_000 + i * 1_000_000)
+            message.header.stamp = ns_to_stamp(stamps[-1])
+            publisher.publish(message)
+            time.sleep(0.002)
+        time.sleep(0.5)
+        recorder.send_signal(signal.SIGINT)
+        _, stderr = recorder.communicate(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate(timeout=10)
+    assert recorder.returncode == 0, stderr
+    assert ("intake: public rclpy API" in stderr) == public, stderr
+    assert f"recorded 1 topics, {PUBLISHED} messages" in stderr and "0 dropped" in stderr, stderr
+    with AnyReader([output], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        recorded = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
+    assert [m.position[0] for m in recorded] == [float(i) for i in range(PUBLISHED)]
+    assert [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in recorded] == stamps
