@@ -78,7 +78,7 @@ def test_markers_show_the_goal_and_path_that_were_sent(harness):
 
     def has_both():
         names = {m.ns for array in received for m in array.markers}
-        return {"goal", "planned_path"} <= names
+        return {"goal", "planned_path", "joint_limits"} <= names
 
     assert harness.spin_until(has_both, timeout=10.0, every=lambda: harness.publish("goal_pose", goal), period=0.05)
     latest = {(m.ns, m.id): m for array in received for m in array.markers}  # newest per marker
