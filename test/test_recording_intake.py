@@ -1,4 +1,4 @@
-"""The recorder's two intake paths (manip_kin.nodes.raw_intake) record the same thing.
+"""The recorder's two intake paths (manip_kin.nodes.polling) record the same thing.
 
 The fast path (the intake thread takes from the middleware, rclpy internals) is what every
 other recorder test runs; here the recorder runs both ways as a subprocess —
@@ -21,7 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 
 from manip_kin.nodes.conversions import ns_to_stamp
-from manip_kin.nodes.raw_intake import fast_path_problem
+from manip_kin.nodes.polling import fast_path_problem
 
 RECORDER = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "recorder"
 PUBLISHED = 300

@@ -15,8 +15,11 @@ do that:
   queue and wakes the loop through a ``threading.Event``. Same behaviour, more CPU (the
   Python executor wakes for every message).
 
+The recorder's :class:`RawSubscription` works the same two ways for its intake thread
+(serialized messages with their middleware info, and message-lost counts).
+
 The fast path is chosen when available; ``MANIP_KIN_PUBLIC_RCLPY=1`` forces the public
-one (a test runs the nodes that way).
+one (tests run the nodes and the recorder that way).
 """
 
 from __future__ import annotations
@@ -25,8 +28,10 @@ import collections
 import os
 import threading
 import time
+from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
+from rclpy.event_handler import QoSSubscriptionEventType, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -199,3 +204,100 @@ def sleep_ns(timeout_ns: int) -> bool:
     if timeout_ns > 0:
         time.sleep(timeout_ns * 1e-9)
     return False
+
+
+def _info_dict(info: Any) -> dict:
+    """rclpy's MessageInfo (a dict on the fast path, a dict-like on the public one) as a dict."""
+    return dict(info) if info is not None else {}
+
+
+class RawSubscription:
+    """A subscription the recorder's intake thread drains: CDR bytes with their message info.
+
+    Fast path: in the never-run group, taken with ``handle.take_message``, message-lost
+    counts from an ``_rclpy.EventHandle`` polled by the same thread. Public path: an
+    executor callback stores ``(data, info)`` (rclpy passes MessageInfo to a two-argument
+    callback) in a bounded queue, and ``SubscriptionEventCallbacks(message_lost=...)``
+    counts losses.
+
+    Args:
+        node: the recorder node.
+        message_type: the rclpy class of the topic's type.
+        topic: topic name.
+        qos: the requested profile.
+        fast: use the fast path (default: when :func:`fast_path_problem` finds none).
+        queue_depth: messages the public path holds between two intake passes.
+
+    Attributes:
+        reports_losses: the middleware reports lost messages for this subscription.
+    """
+
+    def __init__(
+        self, node: Node, message_type: type, topic: str, qos: QoSProfile, fast: bool | None = None, queue_depth=4000
+    ):
+        self.fast = (not fast_path_problem()) if fast is None else fast
+        self._message_type = message_type
+        self._lost_total = 0
+        self._lock = threading.Lock()
+        self._lost_event = None
+        if self.fast:
+            self._queue = None
+            self.subscription = node.create_subscription(
+                message_type, topic, _ignore, qos, callback_group=_NeverExecutedGroup(), raw=True
+            )
+            from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+            try:  # the event handler rclpy makes would sit in the never-run group: poll the event here
+                self._lost_event = _rclpy.EventHandle(
+                    self.subscription.handle, QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST
+                )
+            except (AttributeError, _rclpy.UnsupportedEventTypeError):
+                self._lost_event = None
+            self.reports_losses = self._lost_event is not None
+        else:
+            callbacks = SubscriptionEventCallbacks(message_lost=self._count_lost, use_default_callbacks=False)
+            self._queue: collections.deque | None = collections.deque(maxlen=queue_depth)
+            self.subscription = node.create_subscription(
+                message_type, topic, self._store, qos, event_callbacks=callbacks, raw=True
+            )
+            self.reports_losses = any(
+                h.event_type == QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST
+                for h in self.subscription.event_handlers
+            )
+
+    def _store(self, data: bytes, info: Any) -> None:
+        self._queue.append((data, _info_dict(info)))
+
+    def _count_lost(self, status: Any) -> None:
+        with self._lock:
+            self._lost_total += int(status.total_count_change)
+
+    def take(self) -> tuple[bytes, dict] | None:
+        """The oldest message not yet taken, ``(CDR bytes, message info)``, or None. Never blocks."""
+        if self._queue is not None:
+            try:
+                return self._queue.popleft()
+            except IndexError:
+                return None
+        handle = self.subscription.handle
+        with handle:
+            taken = handle.take_message(self._message_type, True)
+        return None if taken is None else (taken[0], _info_dict(taken[1]))
+
+    def take_lost(self) -> int:
+        """Messages the middleware reported lost since the last call."""
+        if self._lost_event is not None:
+            with self._lost_event:
+                status = self._lost_event.take_event()
+            if status is not None:
+                self._lost_total += int(status.total_count_change)
+        with self._lock:
+            lost, self._lost_total = self._lost_total, 0
+        return lost
+
+    def destroy(self, node: Node) -> None:
+        """Remove the subscription (and its event handlers) from the node."""
+        if self._lost_event is not None:
+            self._lost_event.destroy_when_not_in_use()
+            self._lost_event = None
+        node.destroy_subscription(self.subscription)

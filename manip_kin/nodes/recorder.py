@@ -13,7 +13,7 @@ here (40% of a core for 1 kHz of joint states alone). The intake thread
 instead drains every subscription's queue every few milliseconds; each message
 costs a take (~2 µs) and a write (~8 µs). The receive time recorded is the
 middleware's reception timestamp, so the polling delay does not show in the
-file's timing. The subscriptions are :class:`~manip_kin.nodes.raw_intake.RawSubscription` s:
+file's timing. The subscriptions are :class:`~manip_kin.nodes.polling.RawSubscription` s:
 the one module that touches rclpy internals, with a public-API fallback.
 
 TF: unless a node publishes ``/tf`` (then it is recorded as it is), the recorder writes
@@ -40,7 +40,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from manip_kin.nodes.raw_intake import RawSubscription, fast_path_problem
+from manip_kin.nodes.polling import RawSubscription, fast_path_problem
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
