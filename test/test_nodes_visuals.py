@@ -136,3 +136,31 @@ def test_live_tf_with_a_stand_in_type_composes_to_the_tool_pose(harness, monkeyp
             np.testing.assert_allclose(pose, frame_pose(model, q_by_stamp[stamp], model.dof), atol=1e-12)
     assert any((s // 10**9, s % 10**9) in q_by_stamp for s in stamps), "no TF stamp matched a joint state the test saw"
     assert min(np.diff(stamps)) >= 40_000_000  # at most 25 Hz by stamp
+
+
+def test_goals_the_controller_would_refuse_are_not_drawn_and_break_nothing(harness):
+    node = harness.start(RobotStateNode, robot="irb120", rate_hz=200.0, markers_rate_hz=50.0)
+    received = harness.collect(MarkerArray, "markers")
+    good = make_pose_stamped(make_transform(rpy_to_matrix(0.1, 0.2, 0.3), [0.3, 0.1, 0.4]), "base_link")
+    harness.wait_matched("goal_pose", PoseStamped)
+
+    def goal_markers():
+        return [m for array in received for m in array.markers if m.ns == "goal"]
+
+    assert harness.spin_until(goal_markers, timeout=10.0, every=lambda: harness.publish("goal_pose", good))
+    for position, quaternion in (
+        ((1e300, 1e308, 0.0), (0.0, 0.0, 0.0, 0.0)),
+        ((float("nan"), 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+        ((0.3, 0.1, 0.4), (1e300, 0.0, 0.0, 1.0)),
+    ):
+        bad = PoseStamped()
+        bad.header.frame_id = "base_link"
+        (bad.pose.position.x, bad.pose.position.y, bad.pose.position.z) = position
+        o = bad.pose.orientation
+        o.x, o.y, o.z, o.w = quaternion
+        harness.publish("goal_pose", bad)
+    count = len(goal_markers())
+    assert harness.spin_until(lambda: len(goal_markers()) >= count + 5, timeout=10.0)
+    for marker in goal_markers()[count:]:
+        np.testing.assert_allclose([marker.points[0].x, marker.points[0].y, marker.points[0].z], [0.3, 0.1, 0.4])
+    assert node.loop.stats().errors == 0

@@ -24,9 +24,11 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from manip_kin import markers as core
+from manip_kin.bounds import InputBounds
 from manip_kin.model import RobotModel
 from manip_kin.nodes.conversions import ns_to_stamp, pose_to_matrix
 from manip_kin.nodes.rate_loop import PolledSubscription
+from manip_kin.nodes.validation import pose_problem
 from manip_kin.recording import tf_message
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, encode_tf_message
 from manip_kin.tf_tree import LinkTree, StampDecimator, moving_transforms, static_transforms
@@ -99,6 +101,7 @@ class RobotVisuals:
         self._last_markers_ns = 0
         self._pending_groups: list[str] = []
         self._trail = core.ToolTrail(trail_duration_s, TRAIL_SPACING_S)
+        self._max_distance = InputBounds.of(model).max_target_distance
         self._goal: PoseStamped | None = None
         self._path: Path | None = None
         if self._markers_period_ns:
@@ -130,11 +133,18 @@ class RobotVisuals:
                 self._markers_pub.publish(array)
                 break
 
+    def _usable(self, pose: PoseStamped) -> bool:
+        # What the controller would refuse (non-finite, far away, not a unit quaternion) is not drawn;
+        # the controller logs the rejection.
+        return pose_problem(pose, pose.header.frame_id, max_distance=self._max_distance) is None
+
     def _take_inputs(self) -> None:
         while (goal := self._goal_sub.take()) is not None:
-            self._goal = goal
+            if self._usable(goal):
+                self._goal = goal
         while (path := self._path_sub.take()) is not None:
-            self._path = path
+            if all(self._usable(pose) for pose in path.poses):
+                self._path = path
 
     def marker_array(self, stamp_ns: int, q_values, groups=MARKER_GROUPS) -> MarkerArray:
         """The markers of ``groups`` (namespaces) for the current goal, path, trail and joint positions."""
