@@ -32,6 +32,7 @@ from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import QoSSubscriptionEventType, SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -280,15 +281,21 @@ class RawSubscription:
             except IndexError:
                 return None
         handle = self.subscription.handle
-        with handle:
-            taken = handle.take_message(self._message_type, True)
+        try:
+            with handle:
+                taken = handle.take_message(self._message_type, True)
+        except InvalidHandle:  # destroyed meanwhile (a resubscription): nothing more to take
+            return None
         return None if taken is None else (taken[0], _info_dict(taken[1]))
 
     def take_lost(self) -> int:
         """Messages the middleware reported lost since the last call."""
         if self._lost_event is not None:
-            with self._lost_event:
-                status = self._lost_event.take_event()
+            try:
+                with self._lost_event:
+                    status = self._lost_event.take_event()
+            except InvalidHandle:
+                status = None
             if status is not None:
                 self._lost_total += int(status.total_count_change)
         with self._lock:

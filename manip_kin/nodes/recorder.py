@@ -399,8 +399,7 @@ class RecorderNode(Node):
                 self._add_channel(entry.name, entry.type_name, self.get_publishers_info_by_topic(entry.name))
             self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
             if self._tf is not None:
-                for out in self._tf.feed(entry.name, entry.type_name, data, received):
-                    write_tf(self._writer, out)
+                self._synthesise_tf(entry, data, received)
             count = self._writer.message_count
         entry.received += 1
         sequence = info.get("publication_sequence_number")
@@ -417,6 +416,16 @@ class RecorderNode(Node):
             self._stop(f"max_messages ({self._max_messages}) reached")
             return False
         return True
+
+    def _synthesise_tf(self, entry: _RawTopic, data: bytes, received: int) -> None:
+        """Write the TF this message gives (lock held); a failure stops synthesis, not the recording."""
+        try:
+            for out in self._tf.feed(entry.name, entry.type_name, data, received):
+                write_tf(self._writer, out)
+        except Exception as error:  # noqa: BLE001 - the recording itself must go on
+            self._tf_note = f"TF synthesis stopped at a {entry.name} message: {type(error).__name__}: {error}"
+            self._tf = None
+            self.get_logger().error(self._tf_note)
 
     # -- end ---------------------------------------------------------------------------------
 
