@@ -90,31 +90,44 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     s = 3 * tau**2 - 2 * tau**3
     expected = Q_START + s[:, None] * (Q_GOAL - Q_START)
     deviation = np.abs(positions - expected)
-    # Tolerance: with velocity feed-forward the arm lags the reference by the pipeline's
-    # latency, so the deviation is at most peak joint speed (1.5 |Δq| / T) times that latency,
-    # plus 0.1 % of |Δq| for the proportional loop's transient. On time (LATENCY = 10 ms) that
-    # is 6.7 mrad on the two revolute joints and 1.7 mm on the prismatic one; a quintic
-    # instead of a cubic scaling would be off by up to 42 mrad, a path late by 20 ms by 12 mrad.
-    # A loop that ran late carries the previous command on for that long: the nodes' own worst
-    # lateness (their loop statistics) is added, as a loaded machine makes them late.
+    # The path: every joint moves by the same fraction of its way, q = q0 + σ (qf − q0) for one
+    # σ per sample, whatever the timing (the law's rates and the velocity scaling keep the
+    # joint-space direction). σ is read from the three moving joints; their spread from the
+    # common σ must stay below 1e-3 of the way (a non-uniform or per-joint-timed move is off by
+    # percents).
+    fractions = (positions[:, :3] - Q_START[:3]) / (Q_GOAL - Q_START)[:3]
+    sigma = fractions.mean(axis=1)
+    assert np.abs(fractions - sigma[:, None]).max() < 1e-3
+    assert np.abs(positions[:, 3] - Q_START[3]).max() < 1e-9  # joint 4 does not move
+    # The timing: σ(t) = s(τ). With velocity feed-forward the arm lags the reference by the
+    # pipeline's latency, so |σ − s| is at most the peak rate 1.5 / T times that latency plus
+    # 0.1 % for the proportional loop's transient: on time (LATENCY = 10 ms) 0.0085 of the way,
+    # 6.7 mrad on the revolute joints, 1.7 mm on the prismatic one. A quintic instead of a
+    # cubic scaling would be off by up to 0.053 of the way, a path late by 20 ms by 0.015.
+    # On a machine shared with other jobs DDS delivery and the loops stall now and then (a
+    # Python loop waits for the GIL even at SCHED_FIFO): the median must be on time, every
+    # sample within the on-time bound plus the nodes' own worst loop lateness, or 100 ms.
     client = scara.client()
     lateness_s = 1e-3 * sum(
         float(client.wait_status(name).values["loop_period_error_max_ms"])
         for name in ("robot_state", "cartesian_controller", "trajectory_generator")
     )
-    peak_speed = 1.5 * np.abs(Q_GOAL - Q_START) / DURATION
-    tolerance = peak_speed * (LATENCY + lateness_s) + 1e-3 * np.abs(Q_GOAL - Q_START) + 1e-6
+    peak_rate = 1.5 / DURATION
+    timing_error = np.abs(sigma - s)
+    on_time = peak_rate * LATENCY + 1e-3
+    assert np.median(timing_error[(t >= 0) & (t <= DURATION)]) <= on_time, np.median(timing_error)
+    assert timing_error.max() <= peak_rate * (LATENCY + max(lateness_s, 0.1)) + 1e-3, (timing_error.max(), lateness_s)
+    peak_speed = peak_rate * np.abs(Q_GOAL - Q_START)
     worst = deviation.max(axis=0)
-    assert np.all(worst <= tolerance), (worst, tolerance, lateness_s)
     assert len(t[(t > 0) & (t < DURATION)]) > 0.5 * 500 * DURATION  # the whole move was observed
     # At rest at both ends: the reference's velocity is exactly zero at t = 0 and t = T; the
     # arm's rate is ~0 before the start and within 2 ms after it (the cubic's own rate there
     # is < 0.005 rad/s), and at the end it is the controller's correction K·e, at most
-    # gain_joint · joint_tolerance = 5 /s · 1 mrad once converged.
+    # gain_joint · joint_tolerance = 20 /s · 1 mrad once converged.
     assert not ref_velocities[0].any() and not ref_velocities[-1].any()
     start_window = (t > -0.1) & (t < 0.002)
     assert np.abs(velocities[start_window]).max() < 0.01
-    assert np.abs(velocities[-1]).max() <= 5.0 * 1e-3
+    assert np.abs(velocities[-1]).max() <= 20.0 * 1e-3
     # The arm moved at the cubic's speed (its peak rate 1.5 |Δq| / T was reached; a lag caught
     # up after a late loop makes it higher) and within the joint velocity limits.
     peak = np.abs(velocities).max(axis=0)
@@ -122,8 +135,9 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     assert np.all(peak <= np.array([2.0, 2.0, 0.5, 2.0]) + 1e-9), peak
     np.testing.assert_allclose(positions[-1], Q_GOAL, atol=1e-3)
     print(
-        f"scara cubic move: max deviation per joint {worst.tolist()} (tolerance {tolerance.tolist()}, "
-        f"loops' worst lateness {lateness_s * 1e3:.1f} ms)"
+        f"scara cubic move: |σ - s| median {np.median(timing_error):.2e}, max {timing_error.max():.2e} "
+        f"(on-time bound {on_time:.2e}); max deviation per joint {worst.tolist()}; "
+        f"loops' worst lateness {lateness_s * 1e3:.1f} ms"
     )
 
 

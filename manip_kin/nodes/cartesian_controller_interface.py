@@ -94,7 +94,7 @@ PARAMETERS = (
     ParamSpec(
         "gain_joint",
         "float",
-        5.0,
+        20.0,
         "joint-space gain K on q_ref - q when following a joint reference (plus its velocity)",
         "1/s",
         minimum=0.0,
