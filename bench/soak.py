@@ -34,6 +34,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -123,7 +124,7 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
         names = list(pipeline.processes)
         pids = {name: pipeline.pid(name) for name in names}
         cpu_start = {name: _cpu_seconds(pid) for name, pid in pids.items()}
-        start_ns = time.monotonic_ns()
+        start_ns, start_wall_ns = time.monotonic_ns(), time.time_ns()
         rss_minute1: dict[str, int] = {}
         next_switch = time.monotonic()
         target = 1
@@ -151,74 +152,133 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
         alive = {name: pipeline.running(name) for name in names}
         recorder_code = pipeline.stop_process("recorder", timeout=60)
         recorder_line = pipeline.log_text("recorder").strip().splitlines()[-1]
-    return _summarise(locals() | {"start_ns": start_ns, "end_ns": end_ns, "converged_start": converged})
+    run = SoakRun(
+        minutes=minutes,
+        rate_hz=rate_hz,
+        window_s=window_s,
+        switch_s=switch_s,
+        recording=recording,
+        start_ns=start_ns,
+        start_wall_ns=start_wall_ns,
+        end_ns=end_ns,
+        reached_line_start=bool(converged),
+        names=names,
+        arrivals=counter.arrivals,
+        stamps=counter.stamps,
+        statuses=statuses,
+        rss_minute1=rss_minute1,
+        rss_end=rss_end,
+        cpu=cpu,
+        alive=alive,
+        recorder_code=recorder_code,
+        recorder_line=recorder_line,
+        lines_sent=lines_sent,
+        load=load,
+    )
+    return _summarise(run)
 
 
-def _summarise(run: dict) -> dict:
+@dataclass
+class SoakRun:
+    """What one soak collected, before it is summarised (times from ``time.monotonic_ns``)."""
+
+    minutes: float
+    rate_hz: float
+    window_s: float
+    switch_s: float
+    recording: Path
+    start_ns: int
+    start_wall_ns: int  # the same instant on the system clock (robot_state stamps its messages with it)
+    end_ns: int
+    reached_line_start: bool
+    names: list
+    arrivals: list  # /joint_states arrival times here [ns]
+    stamps: list  # their header stamps [ns]
+    statuses: list  # (time, name, level, message, values) of every /diagnostics status
+    rss_minute1: dict  # [KiB]
+    rss_end: dict  # [KiB]
+    cpu: dict  # [% of one core]
+    alive: dict
+    recorder_code: int | None
+    recorder_line: str
+    lines_sent: int
+    load: list  # (elapsed s, 1-min load average)
+
+
+def _summarise(run: SoakRun) -> dict:
     from manip_kin.recording import read_info, read_messages
 
-    start_ns, end_ns, window_s = run["start_ns"], run["end_ns"], run["window_s"]
-    rate_hz = run["rate_hz"]
-    arrivals = np.array(run["counter"].arrivals, dtype=np.int64)
-    stamps = np.array(run["counter"].stamps, dtype=np.int64)
+    start_ns, end_ns, window_s = run.start_ns, run.end_ns, run.window_s
+    period_ns = 1e9 / run.rate_hz
+    arrivals = np.array(run.arrivals, dtype=np.int64)
+    # /joint_states as recorded: the complete sequence robot_state published (stamps on the
+    # system clock); what this process received is reported too, but it is itself a busy
+    # subscriber on a loaded machine.
+    recorded_stamps = np.array(
+        sorted(
+            record[1].header.stamp.sec * 1_000_000_000 + record[1].header.stamp.nanosec
+            for record in read_messages(run.recording, ["/joint_states"])
+        ),
+        dtype=np.int64,
+    )
+    wall_offset = run.start_wall_ns - start_ns
     windows = []
     edges = np.arange(start_ns, end_ns + 1, int(window_s * 1e9))
     for lo, hi in zip(edges[:-1], edges[1:]):
-        inside = (arrivals >= lo) & (arrivals < hi)
-        window = {"start_s": round((lo - start_ns) * 1e-9, 1), "joint_states_hz": float(inside.sum() / window_s)}
-        window_stamps = np.sort(stamps[inside])
-        if window_stamps.size > 2:
-            jitter = np.abs(np.diff(window_stamps) - 1e9 / rate_hz) * 1e-6
-            window["stamp_period_error_p99_ms"] = float(np.percentile(jitter, 99))
+        stamps = recorded_stamps[(recorded_stamps >= lo + wall_offset) & (recorded_stamps < hi + wall_offset)]
+        window = {
+            "start_s": round((lo - start_ns) * 1e-9, 1),
+            "joint_states_hz": float(stamps.size / window_s),
+            "received_here_hz": float(((arrivals >= lo) & (arrivals < hi)).sum() / window_s),
+        }
+        if stamps.size > 2:
+            window["stamp_period_error_p99_ms"] = float(np.percentile(np.abs(np.diff(stamps) - period_ns), 99) * 1e-6)
         for name in ("robot_state", "cartesian_controller", "trajectory_generator"):
             values = [
                 float(v["loop_period_error_p99_ms"])
-                for t, n, _, _, v in run["statuses"]
+                for t, n, _, _, v in run.statuses
                 if n == name and lo <= t < hi and v.get("loop_period_error_p99_ms")
             ]
             window[f"{name}_p99_ms"] = max(values) if values else None
         windows.append(window)
     errors = [
         {"t_s": round((t - start_ns) * 1e-9, 2), "node": n, "message": m}
-        for t, n, level, m, _ in run["statuses"]
+        for t, n, level, m, _ in run.statuses
         if level == 2 and start_ns <= t <= end_ns
     ]
     nodes = {}
-    for name in run["names"]:
-        before, after = run["rss_minute1"].get(name, 0), run["rss_end"][name]
+    for name in run.names:
+        before, after = run.rss_minute1.get(name, 0), run.rss_end[name]
         nodes[name] = {
             "rss_minute1_mib": before / 1024,
             "rss_end_mib": after / 1024,
             "rss_growth_percent": 100.0 * (after - before) / before if before else None,
-            "cpu_percent_of_core": run["cpu"][name],
-            "alive_at_end": run["alive"][name],
+            "cpu_percent_of_core": run.cpu[name],
+            "alive_at_end": run.alive[name],
         }
-    recording = run["recording"]
+    recording = run.recording
     info = read_info(recording)
     file_counts = {topic.name: topic.message_count for topic in info.topics} if hasattr(info, "topics") else {}
-    recorded = {
-        (record[1].header.stamp.sec, record[1].header.stamp.nanosec)
-        for record in read_messages(recording, ["/joint_states"])
-    }
-    seen = {(int(s // 1_000_000_000), int(s % 1_000_000_000)) for s in stamps}
+    recorded = {(int(v // 1_000_000_000), int(v % 1_000_000_000)) for v in recorded_stamps}
+    seen = {(int(v // 1_000_000_000), int(v % 1_000_000_000)) for v in run.stamps}
     missing = sorted(seen - recorded)
     return {
         "config": {
-            "minutes": run["minutes"],
-            "rate_hz": rate_hz,
+            "minutes": run.minutes,
+            "rate_hz": run.rate_hz,
             "window_s": window_s,
-            "switch_s": run["switch_s"],
-            "lines_sent": run["lines_sent"],
+            "switch_s": run.switch_s,
+            "lines_sent": run.lines_sent,
             "robot": "irb120, recorder on every manip_kin topic",
             "machine": f"{os.cpu_count()} cores, shared; load average per window below",
         },
-        "reached_line_start": bool(run["converged_start"]),
+        "reached_line_start": run.reached_line_start,
         "nodes": nodes,
         "windows": windows,
-        "load_average": [{"t_s": round(t, 1), "load1": la} for t, la in run["load"]],
+        "load_average": [{"t_s": round(t, 1), "load1": la} for t, la in run.load],
         "recorder": {
-            "exit_code": run["recorder_code"],
-            "summary": run["recorder_line"],
+            "exit_code": run.recorder_code,
+            "summary": run.recorder_line,
             "file_topic_counts": file_counts,
             "joint_states_seen_here": len(seen),
             "joint_states_in_file": len(recorded),
@@ -244,16 +304,18 @@ def table(result: dict) -> str:
         )
     lines += [
         "",
-        f"{'window s':>9} {'/joint_states Hz':>17} {'stamp p99 ms':>13} {'rs p99':>7} {'ctl p99':>8} {'gen p99':>8}",
+        "/joint_states Hz: recorded per window (received here in brackets); p99 columns: period error [ms]",
+        f"{'window s':>9} {'/joint_states Hz':>22} {'stamp p99':>10} {'rs loop':>8} {'ctl loop':>9} {'gen loop':>9}",
     ]
+
+    def f(value):
+        return f"{value:.3f}" if isinstance(value, float) else "-"
+
     for w in result["windows"]:
-
-        def f(value):
-            return f"{value:.3f}" if isinstance(value, float) else "-"
-
         lines.append(
-            f"{w['start_s']:9.0f} {w['joint_states_hz']:17.1f} {f(w.get('stamp_period_error_p99_ms')):>13} "
-            f"{f(w['robot_state_p99_ms']):>7} {f(w['cartesian_controller_p99_ms']):>8} {f(w['trajectory_generator_p99_ms']):>8}"
+            f"{w['start_s']:9.0f} {w['joint_states_hz']:12.1f} ({w['received_here_hz']:7.1f}) "
+            f"{f(w.get('stamp_period_error_p99_ms')):>10} {f(w['robot_state_p99_ms']):>8} "
+            f"{f(w['cartesian_controller_p99_ms']):>9} {f(w['trajectory_generator_p99_ms']):>9}"
         )
     hz = [w["joint_states_hz"] for w in result["windows"]]
     rec = result["recorder"]
