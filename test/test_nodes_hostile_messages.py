@@ -141,3 +141,14 @@ def test_robot_state_rejects_absurd_commands(harness, capfd):
     positions = np.array([s.position for s in states])
     assert np.all(np.isfinite(positions)) and all(model.within_limits(q) for q in positions)
     np.testing.assert_allclose(positions[-1], model.start_configuration())
+
+
+def test_generator_refuses_absurd_speed_limits(harness):
+    from manip_kin.errors import InvalidArgumentError
+
+    bounds = InputBounds.of(load_robot("irb120"))
+    with pytest.raises(InvalidArgumentError, match="max_linear_velocity = 1e\\+30 is absurd for this arm; valid: <="):
+        harness.start(TrajectoryGeneratorNode, robot="irb120", max_linear_velocity=1e30)
+    # At the bound itself the node starts.
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", max_linear_velocity=bounds.max_twist_linear)
+    assert node.limits.max_linear_velocity == bounds.max_twist_linear

@@ -41,7 +41,7 @@ class LoopingNode(Node):
     loop: RateLoop
     #: Seconds after a cycle error during which the regular status stays at ERROR.
     ERROR_HOLD_S = 1.0
-    #: Seconds of failing cycles or of a rate below half the target before the loop gives up.
+    #: Seconds of failing cycles or of a rate below a quarter of the target before the loop gives up.
     GIVE_UP_AFTER_S = 10.0
     #: Shortest interval between two ERROR statuses sent from the error path [s].
     ERROR_STATUS_INTERVAL_S = 0.05

@@ -97,7 +97,9 @@ class RateLoop:
         give_up_after: [s] the loop ends and calls ``on_fatal`` when, for this long without
             a break, every cycle raised or the achieved rate stayed below
             ``min_rate_fraction`` of ``rate_hz`` (0 = never give up).
-        min_rate_fraction: see ``give_up_after``.
+        min_rate_fraction: see ``give_up_after``. A quarter by default: a loop slowed by a
+            busy machine keeps going (a restart would not give it CPU); one that has stalled
+            (a wedged middleware call, a cycle far slower than its period) gives up.
     """
 
     def __init__(
@@ -111,7 +113,7 @@ class RateLoop:
         wait: Callable[[int], bool] | None = None,
         on_fatal: Callable[[str], None] | None = None,
         give_up_after: float = 10.0,
-        min_rate_fraction: float = 0.5,
+        min_rate_fraction: float = 0.25,
     ):
         if not 0 < rate_hz < 1e6:
             raise ValueError(f"rate_hz = {rate_hz}; valid: > 0 and < 1e6")
