@@ -290,3 +290,65 @@ def test_ik_entry_point(pose, q_values):
 def test_wrong_lengths_named_in_the_reason(bad):
     problem = conv.command_problem(np.array(bad), MODEL.dof)
     assert f"has {len(bad)} values; valid: 7" in problem
+
+
+# --- joint-space inputs (joint_reference, joint_trajectory) --------------------------------------
+
+
+@SETTINGS
+@given(
+    joint_names,
+    st.lists(st.one_of(number, st.floats(-4, 4)), max_size=10),
+    st.lists(st.one_of(number, st.floats(-4, 4)), max_size=10),
+    st.booleans(),
+)
+def test_joint_reference_handler_and_tracking_law(names, positions, velocities, model_order):
+    from manip_kin.joint_control import joint_tracking_step
+    from manip_kin.nodes.joint_messages import JointReferenceReader
+
+    if model_order:
+        names = list(NAMES)
+        positions = (positions + Q0.tolist())[: len(NAMES)]
+        velocities = (velocities + [0.0] * len(NAMES))[: len(NAMES)]
+    msg = JointState()
+    msg.name = names
+    msg.position = [float(v) for v in positions]
+    msg.velocity = [float(v) for v in velocities]
+    try:
+        q_reference, qdot_reference = JointReferenceReader(MODEL).read(msg)
+    except conv.InvalidMessageError as error:
+        assert "valid" in str(error) or "outside its limits" in str(error)
+        return
+    assert len(set(names)) == len(names)  # repeated names are rejected
+    assert _finite(q_reference, qdot_reference) and MODEL.within_limits(q_reference)
+    output = joint_tracking_step(MODEL, Q0, q_reference, qdot_reference, 20.0, 0.002)
+    assert _finite(output.qdot) and np.all(np.abs(output.qdot) <= MODEL.velocity_limits * (1 + 1e-9))
+    assert MODEL.within_limits(Q0 + output.qdot * 0.002, tolerance=1e-9)
+
+
+@SETTINGS
+@given(
+    st.lists(
+        st.tuples(
+            st.one_of(number, st.floats(0.01, 20)),
+            st.lists(st.one_of(number, st.floats(-2, 2)), min_size=7, max_size=7),
+        ),
+        min_size=0,
+        max_size=3,
+    ),
+    st.sampled_from(["cubic", "quintic", "trapezoidal"]),
+    st.lists(number, min_size=4, max_size=4),
+)
+def test_joint_trajectory_planner(points, scaling, times):
+    from manip_kin.joint_trajectory import TrajectoryPoint, plan_joint_trajectory
+
+    trajectory = [TrajectoryPoint(float(t), [float(v) for v in q], []) for t, q in points]
+    try:
+        plan = plan_joint_trajectory(MODEL, Q0, NAMES, trajectory, scaling)
+    except ManipKinError as error:
+        assert str(error)
+        return
+    assert math.isfinite(plan.duration) and plan.duration > 0
+    for t in [0.0, plan.duration, *[abs(x) for x in times if math.isfinite(x)]]:
+        q, qdot = plan.sample(min(t, 1e308))
+        assert _finite(q, qdot) and MODEL.within_limits(q, tolerance=1e-6)

@@ -83,6 +83,9 @@ class JointReferenceReader:
         names = list(msg.name)
         if names != self._names:
             lookup = {name: i for i, name in enumerate(names)}
+            repeated = sorted({name for name in names if names.count(name) > 1})
+            if repeated:
+                raise InvalidMessageError(f"joint reference names {repeated} more than once; valid: each joint once")
             missing = [name for name in self.model.joint_names if name not in lookup]
             if missing:
                 raise InvalidMessageError(
