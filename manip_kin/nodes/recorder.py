@@ -32,29 +32,26 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from manip_kin.nodes.polling import RawSubscription, fast_path_problem
+from manip_kin.nodes.recorder_config import USAGE, read_config
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.messages import message_class
 from manip_kin.recording.qos import OfferedProfiles, default_offer
-from manip_kin.recording.tf_synthesis import DEFAULT_TF_RATE_HZ, TF_TOPICS, TfSynthesizer, write_tf
-from manip_kin.recording.writer import COMPRESSION_CHOICES, RecordingWriter
+from manip_kin.recording.tf_synthesis import TF_TOPICS, TfSynthesizer, write_tf
+from manip_kin.recording.writer import RecordingWriter
 
 # Every manip_kin topic is subscribed at start, before any publisher is seen, so a one-shot
 # message (a goal sent by `manip_kin goal` right after its publisher appears) is not missed
 # while discovery catches up. Relative names resolve in the recorder's namespace.
 MANIP_KIN_TOPIC_TYPES = PIPELINE_TOPIC_TYPES
-# /tf and /tf_static are recorded when a node publishes them (a ROS install), else synthesised.
-DEFAULT_TOPICS = tuple(MANIP_KIN_TOPIC_TYPES) + TF_TOPICS
 LATCHED_TOPICS = frozenset({"robot_description"})
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_CHECK_PERIOD_S = 0.25
@@ -64,31 +61,6 @@ LOST_CHECK_PERIOD_S = 0.5
 # chunk is compressed: about 2 s of the 1 kHz joint states.
 SUBSCRIPTION_DEPTH = 2000
 
-USAGE = f"""usage: recorder [--ros-args -p NAME:=VALUE ...]
-
-Record topics to a rosbag2-compatible MCAP file (ros2 bag, Foxglove, rosbags read it).
-
-parameters:
-  topics        string[]  topics to record; relative names resolve in the recorder's namespace
-                          (default: every manip_kin topic of its namespace:
-                          {" ".join(DEFAULT_TOPICS)})
-  all_topics    bool      record every topic discovered instead, in any namespace, as
-                          `ros2 bag record -a` (hidden ones excluded; default false)
-  output        string    FILE.mcap for a single file, or a bag directory path
-                          (default runs/recording_YYYYmmdd_HHMMSS.mcap)
-  compression   string    zstd (default) | lz4 | none: MCAP chunk compression
-  duration      double    stop after this many seconds [s]; 0 = until Ctrl-C/SIGTERM (default 0)
-  max_messages  int       stop after this many messages; 0 = unlimited (default 0)
-  tf_rate_hz    double    rate of the /tf written from joint_states when no node publishes /tf
-                          [Hz] (default {DEFAULT_TF_RATE_HZ:g}, as robot_state's tf_rate_hz)
-  frame_prefix  string    prefix of the synthesised TF frame ids (default "", as robot_state's)
-
-Without a live /tf, the recorder writes /tf and /tf_static itself (tf2_msgs/msg/TFMessage)
-from the recorded joint_states and robot_description, so the file alone shows the arm.
-
-Ctrl-C or SIGTERM finish the file; a SIGKILL loses at most about the last second,
-and `manip_kin info --salvage OUT FILE` recovers the rest."""
-
 
 def _manip_kin_type(topic: str) -> str:
     """The type of a manip_kin topic in any namespace (``/left/joint_states``), else ""."""
@@ -96,15 +68,6 @@ def _manip_kin_type(topic: str) -> str:
         return MANIP_KIN_TOPIC_TYPES[topic]
     name = topic.rsplit("/", 1)[-1]
     return MANIP_KIN_TOPIC_TYPES.get(name, "")
-
-
-def _descriptor(description: str, parameter_type: int) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, type=parameter_type, read_only=True)
-
-
-def default_output() -> str:
-    """``runs/recording_<local time>.mcap`` under the working directory."""
-    return f"runs/recording_{datetime.now():%Y%m%d_%H%M%S}.mcap"
 
 
 def requested_qos(publisher_profiles: list[Any]) -> QoSProfile:
@@ -140,69 +103,13 @@ class RecorderNode(Node):
 
     def __init__(self) -> None:
         super().__init__("recorder")
-        topics = self.declare_parameter(
-            "topics", list(DEFAULT_TOPICS), _descriptor("topics to record", ParameterType.PARAMETER_STRING_ARRAY)
-        ).value
-        self._all_topics = bool(
-            self.declare_parameter(
-                "all_topics", False, _descriptor("record every discovered topic", ParameterType.PARAMETER_BOOL)
-            ).value
-        )
-        output = (
-            str(
-                self.declare_parameter(
-                    "output",
-                    "",
-                    _descriptor(
-                        "FILE.mcap or bag directory; empty: timestamped file under runs/",
-                        ParameterType.PARAMETER_STRING,
-                    ),
-                ).value
-            )
-            or default_output()
-        )
-        compression = str(
-            self.declare_parameter(
-                "compression", "zstd", _descriptor("zstd | lz4 | none", ParameterType.PARAMETER_STRING)
-            ).value
-        )
-        self._duration_s = float(
-            self.declare_parameter(
-                "duration",
-                0.0,
-                _descriptor("stop after this many seconds; 0 = unlimited", ParameterType.PARAMETER_DOUBLE),
-            ).value
-        )
-        self._max_messages = int(
-            self.declare_parameter(
-                "max_messages",
-                0,
-                _descriptor("stop after this many messages; 0 = unlimited", ParameterType.PARAMETER_INTEGER),
-            ).value
-        )
-        tf_rate_hz = float(
-            self.declare_parameter(
-                "tf_rate_hz",
-                DEFAULT_TF_RATE_HZ,
-                _descriptor("rate of the synthesised /tf [Hz]", ParameterType.PARAMETER_DOUBLE),
-            ).value
-        )
-        frame_prefix = str(
-            self.declare_parameter(
-                "frame_prefix", "", _descriptor("prefix of synthesised frame ids", ParameterType.PARAMETER_STRING)
-            ).value
-        )
-        if not tf_rate_hz > 0:
-            raise RecordingError(f"parameter tf_rate_hz is {tf_rate_hz}; valid: a positive rate [Hz]")
-        if compression not in COMPRESSION_CHOICES:
-            raise RecordingError(f"parameter compression is {compression!r}; valid: {', '.join(COMPRESSION_CHOICES)}")
-        if self._duration_s < 0 or self._max_messages < 0:
-            raise RecordingError(
-                f"parameters duration ({self._duration_s}) and max_messages ({self._max_messages}) "
-                "must be >= 0 (0 = unlimited)"
-            )
-        if not self._all_topics and not topics:
-            raise RecordingError("parameter topics is empty and all_topics is false: nothing to record")
+        config = read_config(self)
+        topics = config.topics
+        self._all_topics = config.all_topics
+        self._duration_s = config.duration_s
+        self._max_messages = config.max_messages
+        output, compression = config.output, config.compression
+        tf_rate_hz, frame_prefix = config.tf_rate_hz, config.frame_prefix
         self._wanted = {self.resolve_topic_name(t) for t in topics}
         # TF from the recorded joint states, unless /tf is not wanted or a live /tf is recorded (_discover).
         wants_tf = self._all_topics or "/tf" in self._wanted
