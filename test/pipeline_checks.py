@@ -11,7 +11,9 @@ from manip_kin.pipeline import Pipeline
 
 def stop_checked(pipeline: Pipeline) -> None:
     """Stop every node; each must exit with 0 (a node that crashed or hung is a failure)."""
-    codes = pipeline.stop()
+    # 30 s before escalating to SIGTERM/SIGKILL (Pipeline's default is 5 s): on a loaded machine
+    # a clean shutdown can take longer, and an escalation would show as a failed exit code.
+    codes = pipeline.stop(timeout=30.0)
     failed = {name: code for name, code in codes.items() if code != 0}
     tails = "\n".join(f"--- {name} ---\n{pipeline.log_tail(name)}" for name in failed)
     assert not failed, f"nodes exited with {failed}:\n{tails}"
