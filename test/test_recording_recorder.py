@@ -319,3 +319,24 @@ def test_bad_parameter_is_one_line_and_exit_2(processes, tmp_path):
     _, stderr = recorder.communicate(timeout=30)
     assert recorder.returncode == 2
     assert "compression" in stderr and "zstd" in stderr
+
+
+def test_final_drain_after_shutdown_counts_the_gap_and_completes_the_file(ros, recorder_in_process):
+    # A SIGTERM shuts the context down before run_node calls finish(): the final drain then writes
+    # what is queued without the graph (asking it raised RCLError and the recorder exited 1).
+    recorder, output = recorder_in_process(manual_intake=True)
+    states = _reliable_states(ros)
+    _wait(lambda: states.get_subscription_count() > 0, "the recorder to subscribe")
+    entry = recorder._topics["/joint_states"]
+    states.publish(joint_state(ros, 0))
+    _wait(lambda: recorder._drain() or entry.received == 1, "the first message")
+    burst = 30
+    for i in range(1, burst + 1):
+        states.publish(joint_state(ros, i))
+    assert states.wait_for_all_acked(Duration(seconds=30))
+    rclpy.shutdown()
+    line = recorder.finish()
+    lost = burst - QUEUE_DEPTH
+    assert f"{lost} dropped (/joint_states: {lost})" in line, line
+    positions = [m.position[0] for _, m in read_with_rosbags(output)["/joint_states"]]
+    assert positions == [0.0] + [float(i) for i in range(lost + 1, burst + 1)]

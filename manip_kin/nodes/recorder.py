@@ -303,7 +303,7 @@ class RecorderNode(Node):
                 return False
             received = info.get("received_timestamp") or time.time_ns()
             if not self._writer.has_topic(entry.name):
-                self._add_channel(entry.name, entry.type_name, self.get_publishers_info_by_topic(entry.name))
+                self._add_channel(entry.name, entry.type_name, self._publishers_or_none(entry.name) or [])
             self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
             if self._tf is not None:
                 self._synthesise_tf(entry, data, received)
@@ -314,7 +314,8 @@ class RecorderNode(Node):
             if entry.last_sequence is not None and entry.single_publisher and sequence > entry.last_sequence + 1:
                 # A second publisher that discovery has not reported yet numbers its own
                 # messages: ask the graph before calling the gap a loss.
-                if len(self.get_publishers_info_by_topic(entry.name)) <= 1:
+                publishers = self._publishers_or_none(entry.name)
+                if publishers is None or len(publishers) <= 1:
                     entry.sequence_gaps += sequence - entry.last_sequence - 1
                 else:
                     entry.single_publisher = False
@@ -323,6 +324,15 @@ class RecorderNode(Node):
             self._stop(f"max_messages ({self._max_messages}) reached")
             return False
         return True
+
+    def _publishers_or_none(self, topic: str) -> list | None:
+        """The topic's publishers, or None once the graph is gone (the final drain runs after shutdown)."""
+        if not self.context.ok():
+            return None
+        try:
+            return self.get_publishers_info_by_topic(topic)
+        except Exception:  # noqa: BLE001 - the context can end between the check and the query
+            return None
 
     def _synthesise_tf(self, entry: _RawTopic, data: bytes, received: int) -> None:
         """Write the TF this message gives (lock held); a failure stops synthesis, not the recording."""
