@@ -44,7 +44,7 @@ from manip_kin.control import _pose_error_values
 from manip_kin.damped_least_squares import DampedSolver
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.ik_codegen import compile_ik_iteration
-from manip_kin.kinematics import compiled_kinematics
+from manip_kin.kinematics import batch_frame_pose, compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation
 from manip_kin.tasks import Task, parse_task
@@ -59,8 +59,19 @@ DEFAULT_DAMPING = {"lm": 1e-9, "nr": 1e-3, "dls": 0.01}
 LM_ERROR_WEIGHT = 0.02
 # An attempt is abandoned when the error has not dropped below STALL_RATIO times its value
 # STALL_WINDOW iterations earlier: converging attempts shrink it much faster.
-STALL_WINDOW = 6
+STALL_WINDOW = 4
 STALL_RATIO = 0.8
+# Restarts first start from the configurations of a table of random samples whose frame pose
+# is nearest the target (a cheap, deterministic warm start: on the Panda ~40 % fewer
+# iterations than uniformly random restarts), then from uniformly random ones. Pose distance:
+# |Δp|² + (SEED_ORIENTATION_SCALE·reach)²·|ΔR|²_F over the task's components.
+SEED_TABLE_SIZE = 1000
+SEEDED_RESTARTS = 8
+SEED_ORIENTATION_SCALE = 0.3
+# The table's own random stream: a fixed constant of its own, so that it never replays the
+# stream of a seed a caller uses for targets (default_rng(0) draws would put the targets'
+# own configurations in the table).
+SEED_TABLE_STREAM = 0x1C5EED7AB1E
 _TWO_PI = 2.0 * math.pi
 _CONVERGED, _STEPPED, _GENERAL = 1, 0, 2
 
@@ -149,11 +160,36 @@ class _Problem:
         self.sample_span = [high - low for low, high in zip(self.sample_low, sample_high)]
         self.reach = _reach_bound(model, frame_index)
         self.first_joint = model.chain.fixed[0][:3, 3].copy()
+        self.frame_index = frame_index
+        self._seed_table: tuple[np.ndarray, ...] | None = None
 
     def random_start(self, generator: np.random.Generator) -> list:
         return [
             low + span * u for low, span, u in zip(self.sample_low, self.sample_span, generator.random(self.n).tolist())
         ]
+
+    def nearest_starts(self, goal: list, count: int) -> list[list]:
+        """The ``count`` configurations of the seed table whose frame pose is nearest ``goal``.
+
+        The table (SEED_TABLE_SIZE uniform samples within the limits, a fixed stream) is built
+        on first use and kept with the problem.
+        """
+        if self._seed_table is None:
+            samples = np.random.default_rng(SEED_TABLE_STREAM).random((SEED_TABLE_SIZE, self.n))
+            configurations = np.array(self.sample_low) + samples * np.array(self.sample_span)
+            poses = batch_frame_pose(self.model, configurations, self.frame_index)
+            position_weight = 1.0 if self.position_rows else 0.0
+            orientation_weight = SEED_ORIENTATION_SCALE * self.reach if self.orientation_rows else 0.0
+            weights = np.array([position_weight] * 3 + [orientation_weight] * 9)
+            features = np.hstack([poses[:, :3, 3], poses[:, :3, :3].reshape(-1, 9)]) * weights
+            self._seed_table = (configurations, features, 0.5 * np.square(features).sum(axis=1), weights)
+        configurations, features, half_norms, weights = self._seed_table
+        target = np.array([goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]])
+        # ½|f - t|² - ½|t|²: one matrix-vector product ranks the table.
+        distances = half_norms - features @ (target * weights)
+        count = min(count, len(distances))
+        nearest = np.argpartition(distances, count - 1)[:count]
+        return configurations[nearest[np.argsort(distances[nearest])]].tolist()
 
     def project(self, q: list) -> list:
         """``q`` moved into the limits: wrapped by whole turns or clipped."""
@@ -350,6 +386,7 @@ def solve_ik(
                 )
             q_start, solver = nearest.q.tolist(), name + "+numeric"
     out_of_budget = False
+    seeded: list[list] | None = None
     while True:
         attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances)
         attempts.append(attempt)
@@ -359,6 +396,11 @@ def solve_ik(
         if time.perf_counter() >= deadline:
             out_of_budget = True
             break
+        if seeded is None:
+            seeded = problem.nearest_starts(goal, SEEDED_RESTARTS)
+        if seeded:
+            q_start = seeded.pop(0)
+            continue
         if generator is None:
             generator = np.random.default_rng(seed)
         q_start = problem.random_start(generator)
@@ -405,7 +447,9 @@ def _run_attempt(
     fused = problem.iterate if method in ("lm", "dls") else None
     weight, shift = (LM_ERROR_WEIGHT, damping) if method == "lm" else (0.0, damping * damping)
     history: list[float] = []
-    best: _Attempt | None = None
+    # The best point so far as locals (this loop runs every iteration).
+    best_q, best_orientation, best_position, best_error = q, math.inf, math.inf, math.inf
+    success = stalled = False
     iterations = 0
     while True:
         status = _GENERAL
@@ -418,21 +462,20 @@ def _run_attempt(
                 problem, goal, q, method, step, damping, tolerances
             )
         combined = math.hypot(orientation, position)
-        if best is None or combined < best.error:
-            best = _Attempt(q, orientation, position)
         if status == _CONVERGED:
-            best = _Attempt(q, orientation, position, success=True)
+            best_q, best_orientation, best_position, success = q, orientation, position, True
             break
+        if combined < best_error:
+            best_q, best_orientation, best_position, best_error = q, orientation, position, combined
         history.append(combined)
         if len(history) > STALL_WINDOW and combined > STALL_RATIO * history[-1 - STALL_WINDOW]:
-            best.stalled = True
+            stalled = True
             break
         if iterations >= max_iterations:
             break
         iterations += 1
         q = q_next
-    best.iterations = iterations
-    return best
+    return _Attempt(best_q, best_orientation, best_position, iterations, success, stalled)
 
 
 def _general_iteration(
