@@ -384,6 +384,9 @@ def main() -> int:
     parser.add_argument("--ik-rounds", type=int, default=3, help="interleaved rounds of the IK")
     parser.add_argument("--batch", type=int, default=100_000, help="configurations of the batched FK")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--only", choices=("all", "ik"), default="all", help="ik: only the IK rows (while working on the IK)"
+    )
     args = parser.parse_args()
     try:
         import pinocchio
@@ -402,6 +405,9 @@ def main() -> int:
             configurations = [model.random_configuration(rng, margin=0.05) for _ in range(args.configurations)]
             worst = check_agreement(setup, configurations)
             print(f"[anchors] {setup.label}: FK and Jacobian agree within {worst:.2g}", file=sys.stderr)
+            if args.only == "ik":
+                rows.append(bench_ik(setup, args.ik_targets, args.ik_rounds, args.seed))
+                continue
             timed = functions(setup)
             for metric in ("fk", "fk_jacobian"):
                 times = interleaved(timed[metric], configurations, args.rounds, block=200)

@@ -63,9 +63,9 @@ LM_ERROR_WEIGHT = 0.02
 STALL_WINDOW = 4
 STALL_RATIO = 0.6
 # Restarts first start from the configurations of a table of random samples whose frame pose
-# is nearest the target (a cheap, deterministic warm start: with the stall rule, Panda
-# 22.7 -> ~11 iterations per random target, genova7 unchanged), then from uniformly random ones. Pose distance:
-# |Δp|² + (SEED_ORIENTATION_SCALE·reach)²·|ΔR|²_F over the task's components.
+# is nearest the target, then from uniformly random ones: a cheap, deterministic warm start
+# (with the stall rule, Panda 22.7 -> ~11 iterations per random target, genova7 unchanged).
+# Pose distance: |Δp|² + (SEED_ORIENTATION_SCALE·reach)²·|ΔR|²_F over the task's components.
 SEED_TABLE_SIZE = 3000
 SEEDED_RESTARTS = 8
 SEED_ORIENTATION_SCALE = 0.3
