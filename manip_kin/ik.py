@@ -169,8 +169,9 @@ class _Problem:
             low + span * u for low, span, u in zip(self.sample_low, self.sample_span, generator.random(self.n).tolist())
         ]
 
-    def nearest_starts(self, goal: list, count: int) -> list[list]:
-        """The ``count`` configurations of the seed table whose frame pose is nearest ``goal``.
+    def seed_distances(self, goal: list) -> np.ndarray:
+        """Pose distance of every seed-table entry to ``goal``, up to a constant; see
+        :meth:`next_seed`.
 
         The table (SEED_TABLE_SIZE uniform samples within the limits, a fixed stream) is built
         on first use and kept with the problem.
@@ -184,13 +185,21 @@ class _Problem:
             weights = np.array([position_weight] * 3 + [orientation_weight] * 9)
             features = np.hstack([poses[:, :3, 3], poses[:, :3, :3].reshape(-1, 9)]) * weights
             self._seed_table = (configurations, features, 0.5 * np.square(features).sum(axis=1), weights)
-        configurations, features, half_norms, weights = self._seed_table
+        _, features, half_norms, weights = self._seed_table
         target = np.array([goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]])
         # ½|f - t|² - ½|t|²: one matrix-vector product ranks the table.
-        distances = half_norms - features @ (target * weights)
-        count = min(count, len(distances))
-        nearest = np.argpartition(distances, count - 1)[:count]
-        return configurations[nearest[np.argsort(distances[nearest])]].tolist()
+        return half_norms - features @ (target * weights)
+
+    def next_seed(self, distances: np.ndarray) -> list:
+        """The not yet used table entry nearest the goal of ``distances`` (marked as used)."""
+        index = int(distances.argmin())
+        distances[index] = math.inf
+        return self._seed_table[0][index].tolist()
+
+    def nearest_starts(self, goal: list, count: int) -> list[list]:
+        """The ``count`` table entries nearest ``goal``, nearest first."""
+        distances = self.seed_distances(goal)
+        return [self.next_seed(distances) for _ in range(min(count, len(distances)))]
 
     def project(self, q: list) -> list:
         """``q`` moved into the limits: wrapped by whole turns or clipped."""
@@ -387,7 +396,7 @@ def solve_ik(
                 )
             q_start, solver = nearest.q.tolist(), name + "+numeric"
     out_of_budget = False
-    seeded: list[list] | None = None
+    seed_distances: np.ndarray | None = None
     while True:
         attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances)
         attempts.append(attempt)
@@ -397,10 +406,10 @@ def solve_ik(
         if time.perf_counter() >= deadline:
             out_of_budget = True
             break
-        if seeded is None:
-            seeded = problem.nearest_starts(goal, SEEDED_RESTARTS)
-        if seeded:
-            q_start = seeded.pop(0)
+        if len(attempts) <= SEEDED_RESTARTS:
+            if seed_distances is None:
+                seed_distances = problem.seed_distances(goal)
+            q_start = problem.next_seed(seed_distances)
             continue
         if generator is None:
             generator = np.random.default_rng(seed)

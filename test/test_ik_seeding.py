@@ -51,18 +51,19 @@ def test_restarts_use_the_seed_table_first(monkeypatch):
     rng = np.random.default_rng(5)
     target = _pose(model, model.random_configuration(rng))
     used = []
-    original = ik_module._Problem.nearest_starts
+    original = ik_module._Problem.next_seed
 
-    def recording(self, goal, count):
-        starts = original(self, goal, count)
-        used.extend(starts)
-        return starts
+    def recording(self, distances):
+        used.append(original(self, distances))
+        return used[-1]
 
-    monkeypatch.setattr(ik_module._Problem, "nearest_starts", recording)
-    # One iteration per attempt forces restarts; the first restarts are the table's entries.
+    monkeypatch.setattr(ik_module._Problem, "next_seed", recording)
+    # One iteration per attempt forces restarts: they start from the table's nearest entries.
     result = solve_ik(model, target, model.random_configuration(rng), max_iterations=1, restarts=3, seed=1)
     assert result.attempts == 4
-    assert len(used) == ik_module.SEEDED_RESTARTS
+    monkeypatch.undo()
+    problem = ik_module._problem(model, model.frame_index(model.default_frame), parse_task(None, model))
+    assert used == problem.nearest_starts(target.tolist(), 3)
     # A full solve from a poor start converges within limits.
     solved = solve_ik(model, target, model.lower.copy(), seed=1)
     assert solved.success and model.within_limits(solved.q, 0.0)
