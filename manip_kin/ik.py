@@ -62,6 +62,12 @@ LM_ERROR_WEIGHT = 0.02
 # the seeded restarts below are cheaper than finishing a poor attempt.)
 STALL_WINDOW = 4
 STALL_RATIO = 0.6
+# The first attempt of lm (from the caller's guess) when restarts may follow gets less
+# patience: its error must halve every 2 iterations. From a guess near the solution LM
+# converges much faster than that; from a far one, a seeded restart is cheaper than
+# persisting (Panda: ~10 % fewer iterations + attempts, genova7 ~5 %).
+FIRST_STALL_WINDOW = 2
+FIRST_STALL_RATIO = 0.5
 # Restarts first start from the configurations of a table of random samples whose frame pose
 # is nearest the target, then from uniformly random ones: a cheap, deterministic warm start
 # (with the stall rule, Panda 22.7 -> ~11 iterations per random target, genova7 unchanged).
@@ -184,9 +190,17 @@ class _Problem:
             orientation_weight = SEED_ORIENTATION_SCALE * self.reach if self.orientation_rows else 0.0
             weights = np.array([position_weight] * 3 + [orientation_weight] * 9)
             features = np.hstack([poses[:, :3, 3], poses[:, :3, :3].reshape(-1, 9)]) * weights
-            self._seed_table = (configurations, features, 0.5 * np.square(features).sum(axis=1), weights)
+            # float32: ranking needs no more, and the product over the table is ~30 % cheaper
+            self._seed_table = (
+                configurations,
+                features.astype(np.float32),
+                (0.5 * np.square(features).sum(axis=1)).astype(np.float32),
+                weights.astype(np.float32),
+            )
         _, features, half_norms, weights = self._seed_table
-        target = np.array([goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]])
+        target = np.array(
+            [goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]], dtype=np.float32
+        )
         # ½|f - t|² - ½|t|²: one matrix-vector product ranks the table.
         return half_norms - features @ (target * weights)
 
@@ -397,8 +411,10 @@ def solve_ik(
             q_start, solver = nearest.q.tolist(), name + "+numeric"
     out_of_budget = False
     seed_distances: np.ndarray | None = None
+    stall = (FIRST_STALL_WINDOW, FIRST_STALL_RATIO) if method == "lm" and restarts > 0 else (STALL_WINDOW, STALL_RATIO)
     while True:
-        attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances)
+        attempt = _run_attempt(problem, goal, q_start, method, step, damping, max_iterations, tolerances, stall)
+        stall = (STALL_WINDOW, STALL_RATIO)
         attempts.append(attempt)
         total_iterations += attempt.iterations
         if attempt.success or len(attempts) > restarts:
@@ -451,9 +467,15 @@ def _run_attempt(
     damping: float,
     max_iterations: int,
     tolerances: tuple[float, float],
+    stall: tuple[int, float],
 ) -> _Attempt:
-    """Iterate from ``q`` until converged, stalled or out of iterations; the best point found."""
+    """Iterate from ``q`` until converged, stalled or out of iterations; the best point found.
+
+    ``stall``: (window, ratio): stalled when the error is above ratio times its value window
+    iterations earlier.
+    """
     tolerance_orientation, tolerance_position = tolerances
+    stall_window, stall_ratio = stall
     fused = problem.iterate if method in ("lm", "dls") else None
     weight, shift = (LM_ERROR_WEIGHT, damping) if method == "lm" else (0.0, damping * damping)
     history: list[float] = []
@@ -478,7 +500,7 @@ def _run_attempt(
         if combined < best_error:
             best_q, best_orientation, best_position, best_error = q, orientation, position, combined
         history.append(combined)
-        if len(history) > STALL_WINDOW and combined > STALL_RATIO * history[-1 - STALL_WINDOW]:
+        if len(history) > stall_window and combined > stall_ratio * history[-1 - stall_window]:
             stalled = True
             break
         if iterations >= max_iterations:

@@ -41,7 +41,10 @@ def test_nearest_starts_are_the_table_entries_nearest_the_target(name):
 
     all_distances = np.array([distance(q) for q in configurations])
     expected = np.sort(all_distances)[:5]
-    np.testing.assert_allclose([distance(q) for q in starts], expected, rtol=1e-9, atol=1e-12)
+    found = np.array([distance(q) for q in starts])
+    # the table ranks in float32: equal up to its rounding, nearest first
+    np.testing.assert_allclose(np.sort(found), expected, rtol=1e-6, atol=1e-9)
+    assert np.all(np.diff(found) >= -1e-6 * found[1:])
     # and they are far nearer than a typical table entry
     assert expected[0] < 0.1 * np.median(all_distances)
 
