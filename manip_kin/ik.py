@@ -44,7 +44,8 @@ from manip_kin.control import _pose_error_values
 from manip_kin.damped_least_squares import DampedSolver
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.ik_codegen import compile_ik_iteration
-from manip_kin.kinematics import batch_frame_pose, compiled_kinematics
+from manip_kin.ik_seeds import SeedTable
+from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.rotations import check_rotation
 from manip_kin.tasks import Task, parse_task
@@ -68,17 +69,9 @@ STALL_RATIO = 0.6
 # persisting (Panda: ~10 % fewer iterations + attempts, genova7 ~5 %).
 FIRST_STALL_WINDOW = 2
 FIRST_STALL_RATIO = 0.5
-# Restarts first start from the configurations of a table of random samples whose frame pose
-# is nearest the target, then from uniformly random ones: a cheap, deterministic warm start
-# (with the stall rule, Panda 22.7 -> ~11 iterations per random target, genova7 unchanged).
-# Pose distance: |Δp|² + (SEED_ORIENTATION_SCALE·reach)²·|ΔR|²_F over the task's components.
-SEED_TABLE_SIZE = 3000
+# Restarts first start from the SEEDED_RESTARTS entries of the seed table nearest the
+# target (:mod:`manip_kin.ik_seeds`), then from uniformly random configurations.
 SEEDED_RESTARTS = 8
-SEED_ORIENTATION_SCALE = 0.3
-# The table's own random stream: a fixed constant of its own, so that it never replays the
-# stream of a seed a caller uses for targets (default_rng(0) draws would put the targets'
-# own configurations in the table).
-SEED_TABLE_STREAM = 0x1C5EED7AB1E
 _TWO_PI = 2.0 * math.pi
 _CONVERGED, _STEPPED, _GENERAL = 1, 0, 2
 
@@ -167,53 +160,20 @@ class _Problem:
         self.sample_span = [high - low for low, high in zip(self.sample_low, sample_high)]
         self.reach = _reach_bound(model, frame_index)
         self.first_joint = model.chain.fixed[0][:3, 3].copy()
-        self.frame_index = frame_index
-        self._seed_table: tuple[np.ndarray, ...] | None = None
+        self.seeds = SeedTable(
+            model,
+            frame_index,
+            self.sample_low,
+            self.sample_span,
+            bool(self.position_rows),
+            bool(self.orientation_rows),
+            self.reach,
+        )
 
     def random_start(self, generator: np.random.Generator) -> list:
         return [
             low + span * u for low, span, u in zip(self.sample_low, self.sample_span, generator.random(self.n).tolist())
         ]
-
-    def seed_distances(self, goal: list) -> np.ndarray:
-        """Pose distance of every seed-table entry to ``goal``, up to a constant; see
-        :meth:`next_seed`.
-
-        The table (SEED_TABLE_SIZE uniform samples within the limits, a fixed stream) is built
-        on first use and kept with the problem.
-        """
-        if self._seed_table is None:
-            samples = np.random.default_rng(SEED_TABLE_STREAM).random((SEED_TABLE_SIZE, self.n))
-            configurations = np.array(self.sample_low) + samples * np.array(self.sample_span)
-            poses = batch_frame_pose(self.model, configurations, self.frame_index)
-            position_weight = 1.0 if self.position_rows else 0.0
-            orientation_weight = SEED_ORIENTATION_SCALE * self.reach if self.orientation_rows else 0.0
-            weights = np.array([position_weight] * 3 + [orientation_weight] * 9)
-            features = np.hstack([poses[:, :3, 3], poses[:, :3, :3].reshape(-1, 9)]) * weights
-            # float32: ranking needs no more, and the product over the table is ~30 % cheaper
-            self._seed_table = (
-                configurations,
-                features.astype(np.float32),
-                (0.5 * np.square(features).sum(axis=1)).astype(np.float32),
-                weights.astype(np.float32),
-            )
-        _, features, half_norms, weights = self._seed_table
-        target = np.array(
-            [goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]], dtype=np.float32
-        )
-        # ½|f - t|² - ½|t|²: one matrix-vector product ranks the table.
-        return half_norms - features @ (target * weights)
-
-    def next_seed(self, distances: np.ndarray) -> list:
-        """The not yet used table entry nearest the goal of ``distances`` (marked as used)."""
-        index = int(distances.argmin())
-        distances[index] = math.inf
-        return self._seed_table[0][index].tolist()
-
-    def nearest_starts(self, goal: list, count: int) -> list[list]:
-        """The ``count`` table entries nearest ``goal``, nearest first."""
-        distances = self.seed_distances(goal)
-        return [self.next_seed(distances) for _ in range(min(count, len(distances)))]
 
     def project(self, q: list) -> list:
         """``q`` moved into the limits: wrapped by whole turns or clipped."""
@@ -424,8 +384,8 @@ def solve_ik(
             break
         if len(attempts) <= SEEDED_RESTARTS:
             if seed_distances is None:
-                seed_distances = problem.seed_distances(goal)
-            q_start = problem.next_seed(seed_distances)
+                seed_distances = problem.seeds.distances(goal)
+            q_start = problem.seeds.pop_nearest(seed_distances)
             continue
         if generator is None:
             generator = np.random.default_rng(seed)

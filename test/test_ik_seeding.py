@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import manip_kin.ik as ik_module
+import manip_kin.ik_seeds as seeds_module
 from manip_kin.ik import solve_ik
 from manip_kin.kinematics import KinematicsData, forward_kinematics
 from manip_kin.robots import load_robot
@@ -29,11 +30,11 @@ def test_nearest_starts_are_the_table_entries_nearest_the_target(name):
     problem = ik_module._problem(model, frame_index, parse_task(None, model))
     rng = np.random.default_rng(3)
     target = _pose(model, model.random_configuration(rng))
-    starts = np.array(problem.nearest_starts(target.tolist(), 5))
-    configurations = problem._seed_table[0]
-    assert len(configurations) == ik_module.SEED_TABLE_SIZE
+    starts = np.array(problem.seeds.nearest(target.tolist(), 5))
+    configurations = problem.seeds.configurations
+    assert len(configurations) == seeds_module.TABLE_SIZE
     assert np.all(configurations >= model.lower) and np.all(configurations <= model.upper)
-    scale = (ik_module.SEED_ORIENTATION_SCALE * problem.reach) ** 2
+    scale = (seeds_module.ORIENTATION_SCALE * problem.reach) ** 2
 
     def distance(q):
         pose = _pose(model, q)
@@ -54,19 +55,19 @@ def test_restarts_use_the_seed_table_first(monkeypatch):
     rng = np.random.default_rng(5)
     target = _pose(model, model.random_configuration(rng))
     used = []
-    original = ik_module._Problem.next_seed
+    original = seeds_module.SeedTable.pop_nearest
 
     def recording(self, distances):
         used.append(original(self, distances))
         return used[-1]
 
-    monkeypatch.setattr(ik_module._Problem, "next_seed", recording)
+    monkeypatch.setattr(seeds_module.SeedTable, "pop_nearest", recording)
     # One iteration per attempt forces restarts: they start from the table's nearest entries.
     result = solve_ik(model, target, model.random_configuration(rng), max_iterations=1, restarts=3, seed=1)
     assert result.attempts == 4
     monkeypatch.undo()
     problem = ik_module._problem(model, model.frame_index(model.default_frame), parse_task(None, model))
-    assert used == problem.nearest_starts(target.tolist(), 3)
+    assert used == problem.seeds.nearest(target.tolist(), 3)
     # A full solve from a poor start converges within limits.
     solved = solve_ik(model, target, model.lower.copy(), seed=1)
     assert solved.success and model.within_limits(solved.q, 0.0)
