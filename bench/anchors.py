@@ -298,7 +298,14 @@ def bench_ik(setup: Setup, n_targets: int, rounds: int, seed: int) -> dict:
         return bool(np.linalg.norm(position) < 1e-5 and np.linalg.norm(orientation) < 1e-4)
 
     candidates = {"manip_kin": ours, "rtb": rtb}
-    successes = {name: sum(succeeded(candidates[name](i), targets[i]) for i in range(n_targets)) for name in candidates}
+    ours_results = [solve_ik(model, targets[i], guesses[i], frame=frame, seed=seed + i) for i in range(n_targets)]
+    successes = {
+        "manip_kin": sum(succeeded(result.q, targets[i]) for i, result in enumerate(ours_results)),
+        "rtb": sum(succeeded(rtb(i), targets[i]) for i in range(n_targets)),
+    }
+    for index, result in enumerate(ours_results):  # why (e.g. the time budget on a loaded machine)
+        if not succeeded(result.q, targets[index]):
+            print(f"[anchors] {setup.label}: IK target {index} failed: {result.reason}", file=sys.stderr)
     times = interleaved(candidates, list(range(n_targets)), rounds, block=50)
     row = summarize("IK mean per target", f"{setup.label}, {n_targets} random targets", times)
     for name in candidates:
