@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.closed_form import nearest_closed_form
+from manip_kin.closed_form import nearest_closed_form, solver_for_task
 from manip_kin.control import _pose_error_values
 from manip_kin.damped_least_squares import DampedSolver
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
@@ -344,10 +344,11 @@ def solve_ik(
         raise InvalidArgumentError(f"restarts = {restarts!r}; valid: an integer >= 0")
     time_budget = _check_positive(time_budget, "time_budget")
     problem = _problem(model, frame_index, task_spec)
-    if restarts > 0:
+    if restarts > 0 and not (closed_form and solver_for_task(model, frame_index, task_spec) is not None):
         problem.seeds.configurations  # noqa: B018 - builds the table once, outside the budget
     # The clock starts after the one-time work for a new (model, frame, task): generating its
     # code and the seed table is not solving (a loaded machine would spend the budget on it).
+    # Where the closed form answers, the table is only built if a restart ever needs it.
     started = time.perf_counter()
     start = model.start_configuration() if q0 is None else model.check_q(q0, "q0")
     generator = rng
