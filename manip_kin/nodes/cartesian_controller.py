@@ -33,6 +33,7 @@ from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.topics import STREAM_DEPTH
 from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
 
 
@@ -62,7 +63,7 @@ class CartesianControllerNode(LoopingNode):
         self._twist_sub = PolledSubscription(self, TwistStamped, "goal_twist", 10)
         self._reference_sub = PolledSubscription(self, JointState, "joint_reference", 10)
         self._references = JointReferenceReader(self.model)
-        self._command_pub = self.create_publisher(Float64MultiArray, "joint_velocity_commands", 10)
+        self._command_pub = self.create_publisher(Float64MultiArray, "joint_velocity_commands", STREAM_DEPTH)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
         self._zeros = np.zeros(self.model.dof)

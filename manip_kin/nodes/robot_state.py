@@ -28,6 +28,7 @@ from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.topics import STREAM_DEPTH
 from manip_kin.nodes.visuals import RobotVisuals
 from manip_kin.robots import bundled_robot_names
 from manip_kin.urdf import model_to_urdf
@@ -247,11 +248,11 @@ class RobotStateNode(LoopingNode):
 
         self._max_command = InputBounds.of(self.model).max_command
         self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", 10)
-        self._joint_state_pub = self.create_publisher(JointState, "joint_states", 10)
-        self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", 10)
-        self._tool_pose_pub = self.create_publisher(PoseStamped, "tool_pose", 10)
-        self._ee_twist_pub = self.create_publisher(TwistStamped, "ee_twist", 10)
-        self._tool_twist_pub = self.create_publisher(TwistStamped, "tool_twist", 10)
+        self._joint_state_pub = self.create_publisher(JointState, "joint_states", STREAM_DEPTH)
+        self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", STREAM_DEPTH)
+        self._tool_pose_pub = self.create_publisher(PoseStamped, "tool_pose", STREAM_DEPTH)
+        self._ee_twist_pub = self.create_publisher(TwistStamped, "ee_twist", STREAM_DEPTH)
+        self._tool_twist_pub = self.create_publisher(TwistStamped, "tool_twist", STREAM_DEPTH)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE

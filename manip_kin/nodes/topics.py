@@ -24,3 +24,9 @@ PIPELINE_TOPIC_TYPES = {
     "markers": "visualization_msgs/msg/MarkerArray",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
+
+#: History depth of the publishers that stream every cycle (reliable, keep last). A reliable
+#: writer drops its oldest unacknowledged sample once its history is full, so with depth 10 a
+#: subscriber (a recorder, a test) starved for 10 ms at 1 kHz lost messages for good; 1000
+#: keeps one second for it. Subscribers that want only the newest keep their own shallow queue.
+STREAM_DEPTH = 1000
