@@ -57,7 +57,7 @@ $(ANCHORS_STAMP): bench/requirements-anchors.txt setup.py
 bench-anchors: $(ANCHORS_STAMP)
 	$(ANCHORS_VENV)/bin/python bench/anchors.py --out bench/results/anchors.json
 
-# Full pipeline + recorder at 1 kHz, lines alternating (issue 8); not part of `make test`.
+# Full pipeline + recorder at 1 kHz for SOAK_MINUTES, lines alternating; not part of `make test`.
 # `make soak SOAK_MINUTES=1` for a short run.
 SOAK_MINUTES ?= 10
 soak: $(STAMP)
