@@ -381,12 +381,12 @@ def test_bad_arguments_raise_clear_errors():
 
 @pytest.mark.parametrize("robot", ["genova7", "irb120", "scara", "panda"])
 def test_generated_iteration_matches_the_plain_python_one(robot):
-    from manip_kin import ik
+    from manip_kin import ik_iteration, ik_problem
 
     model = panda() if robot == "panda" else load_robot(robot)
     rng = np.random.default_rng(50)
     task = parse_task(None, model)
-    problem = ik._problem(model, model.frame_index(model.default_frame), task)
+    problem = ik_problem.problem_for(model, model.frame_index(model.default_frame), task)
     assert problem.iterate is not None
     held_seen = 0
     for _ in range(40):
@@ -398,10 +398,13 @@ def test_generated_iteration_matches_the_plain_python_one(robot):
         # Targets from configurations up to 30% beyond the limits: some pull joints outside.
         span = model.upper - model.lower
         target = reference_pose(model, rng.uniform(model.lower - 0.3 * span, model.upper + 0.3 * span)).tolist()
-        for method, weight, shift, damping in (("lm", ik.LM_ERROR_WEIGHT, 1e-9, 1e-9), ("dls", 0.0, 1e-4, 1e-2)):
+        for method, weight, shift, damping in (
+            ("lm", ik_iteration.LM_ERROR_WEIGHT, 1e-9, 1e-9),
+            ("dls", 0.0, 1e-4, 1e-2),
+        ):
             status, fused_q, orientation, position = problem.iterate(q.tolist(), target, weight, shift, 0.7, 1e-6, 1e-6)
             assert status == 0
-            plain = ik._general_iteration(problem, target, q.tolist(), method, 0.7, damping, (1e-6, 1e-6))
+            plain = ik_iteration.general_iteration(problem, target, q.tolist(), method, 0.7, damping, (1e-6, 1e-6))
             np.testing.assert_allclose(fused_q, plain[1], rtol=1e-9, atol=1e-11)
             assert (orientation, position) == pytest.approx(plain[2:], rel=1e-12)
             assert model.within_limits(fused_q, 0.0)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import manip_kin.ik as ik_module
+import manip_kin.ik_problem as problem_module
 import manip_kin.ik_seeds as seeds_module
 from manip_kin.ik import solve_ik
 from manip_kin.kinematics import KinematicsData, forward_kinematics
@@ -27,7 +27,7 @@ def _pose(model, q) -> np.ndarray:
 def test_nearest_starts_are_the_table_entries_nearest_the_target(name):
     model = load_robot(name)
     frame_index = model.frame_index(model.default_frame)
-    problem = ik_module._problem(model, frame_index, parse_task(None, model))
+    problem = problem_module.problem_for(model, frame_index, parse_task(None, model))
     rng = np.random.default_rng(3)
     target = _pose(model, model.random_configuration(rng))
     starts = np.array(problem.seeds.nearest(target.tolist(), 5))
@@ -66,7 +66,7 @@ def test_restarts_use_the_seed_table_first(monkeypatch):
     result = solve_ik(model, target, model.random_configuration(rng), max_iterations=1, restarts=3, seed=1)
     assert result.attempts == 4
     monkeypatch.undo()
-    problem = ik_module._problem(model, model.frame_index(model.default_frame), parse_task(None, model))
+    problem = problem_module.problem_for(model, model.frame_index(model.default_frame), parse_task(None, model))
     assert used == problem.seeds.nearest(target.tolist(), 3)
     # A full solve from a poor start converges within limits.
     solved = solve_ik(model, target, model.lower.copy(), seed=1)
