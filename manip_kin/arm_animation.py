@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.figure_axes import equal_3d_axes
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, decode_tf_message
 from manip_kin.tf_tree import LinkTransform, compose
 
@@ -99,18 +100,10 @@ VIEW_ELEVATION_DEG = 15.0
 VIEW_AZIMUTH_DEG = -15.0
 
 
-def _equal_limits(axis, points: np.ndarray) -> None:
+def _set_view(axis, points: np.ndarray) -> None:
     axis.view_init(elev=VIEW_ELEVATION_DEG, azim=VIEW_AZIMUTH_DEG)
     axis.set_proj_type("ortho")  # no perspective: heights read true against the z axis
-    centre = (points.max(axis=0) + points.min(axis=0)) / 2
-    half = max(float((points.max(axis=0) - points.min(axis=0)).max()) / 2, 0.05)
-    axis.set_xlim(centre[0] - half, centre[0] + half)
-    axis.set_ylim(centre[1] - half, centre[1] + half)
-    axis.set_zlim(centre[2] - half, centre[2] + half)
-    axis.set_box_aspect((1, 1, 1))
-    axis.set_xlabel("x [m]")
-    axis.set_ylabel("y [m]")
-    axis.set_zlabel("z [m]")
+    equal_3d_axes(axis, points)
 
 
 def _draw_arm(axis, arm: ArmFrames, sample: int, colour, label: str | None = None):
@@ -140,7 +133,7 @@ def draw_arm_picture(arm: ArmFrames, out: str | Path, tool_frame: str = "tool", 
         tool = arm.positions[:, arm.frames.index(tool_frame)]
         axis.plot(*tool.T, color="tab:purple", linewidth=1.5, label=f"{tool_frame} path")
     axis.scatter(0, 0, 0, color="black", marker="s", s=30, label=arm.frames[0])
-    _equal_limits(axis, arm.positions.reshape(-1, 3))
+    _set_view(axis, arm.positions.reshape(-1, 3))
     axis.set_title(title or "arm from the recording's /tf")
     axis.legend(loc="upper left", fontsize="small")
     figure.tight_layout()
@@ -180,7 +173,7 @@ def write_animation(
     samples = np.unique(np.linspace(0, len(arm.time) - 1, min(max_frames, len(arm.time))).astype(int))
     figure = plt.figure(figsize=(6, 6))
     axis = figure.add_subplot(projection="3d")
-    _equal_limits(axis, arm.positions.reshape(-1, 3))
+    _set_view(axis, arm.positions.reshape(-1, 3))
     lines, joints = _draw_arm(axis, arm, samples[0], "dimgray")
     tool_index = arm.frames.index(tool_frame) if tool_frame in arm.frames else len(arm.frames) - 1
     (trail,) = axis.plot([], [], [], color="tab:purple", linewidth=1.5)

@@ -27,6 +27,7 @@ import numpy as np
 
 from manip_kin.arm_animation import ArmFrames, draw_arm_picture, load_arm_frames
 from manip_kin.errors import ManipKinError
+from manip_kin.figure_axes import equal_3d_axes
 from manip_kin.rotations import matrix_to_rotvec, quat_to_matrix
 
 FIGURES = (
@@ -345,16 +346,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
         axis.plot(*line.T, linestyle="--", color="tab:orange", linewidth=2, label="planned line" if k == 0 else None)
     if drawn:
         # Equal scales on x, y and z, so a straight line and the arm's proportions look as they are.
-        points = np.vstack(drawn)
-        centre = (points.max(axis=0) + points.min(axis=0)) / 2
-        half = max(float((points.max(axis=0) - points.min(axis=0)).max()) / 2, 0.05)
-        axis.set_xlim(centre[0] - half, centre[0] + half)
-        axis.set_ylim(centre[1] - half, centre[1] + half)
-        axis.set_zlim(centre[2] - half, centre[2] + half)
-        axis.set_box_aspect((1, 1, 1))
-    axis.set_xlabel("x [m]")
-    axis.set_ylabel("y [m]")
-    axis.set_zlabel("z [m]")
+        equal_3d_axes(axis, np.vstack(drawn))
     axis.set_title(f"{prefix}tool path, planned line and arm (base frame)")
     axis.legend(loc="upper left", fontsize="small")
     save(figure, "path_3d.png")

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.figure_axes import equal_3d_axes
 from manip_kin.kinematics import frame_poses
 from manip_kin.model import RobotModel
 
@@ -91,17 +92,7 @@ def plot_sweep(model: RobotModel, sweep: Sweep, path: str | Path, title: str = "
         end[:, 0], end[:, 1], end[:, 2], color="tab:green", linestyle="--", linewidth=1.0, label=model.default_frame
     )
     axes.scatter([0.0], [0.0], [0.0], color="black", marker="s", s=60, label=f"base ({model.base_frame})")
-    # Equal scales: a cube around every point drawn.
-    every = points.reshape(-1, 3)
-    centre = 0.5 * (every.min(axis=0) + every.max(axis=0))
-    half = 0.5 * float(np.max(every.max(axis=0) - every.min(axis=0))) or 0.1
-    axes.set_xlim(centre[0] - half, centre[0] + half)
-    axes.set_ylim(centre[1] - half, centre[1] + half)
-    axes.set_zlim(centre[2] - half, centre[2] + half)
-    axes.set_box_aspect((1.0, 1.0, 1.0))
-    axes.set_xlabel("x [m]")
-    axes.set_ylabel("y [m]")
-    axes.set_zlabel("z [m]")
+    equal_3d_axes(axes, points)
     axes.set_title(title or f"{model.name}: {count - 1} steps in joint space (frames in {model.base_frame})")
     axes.legend(loc="upper left", fontsize="small")
     figure.tight_layout()

@@ -5,7 +5,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 
 from __future__ import annotations
 
-from manip_kin.nodes.params import ParamSpec, usage_text
+from manip_kin.nodes.params import REALTIME_PRIORITY, ParamSpec, usage_text
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import ControllerState
 
@@ -126,13 +126,7 @@ PARAMETERS = (
         positive=True,
         tunable=True,
     ),
-    ParamSpec(
-        "realtime_priority",
-        "int",
-        0,
-        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
-        minimum=0,
-    ),
+    REALTIME_PRIORITY,
 )
 
 USAGE = usage_text(

@@ -160,6 +160,16 @@ class ParamSpec:
         }[self.kind]
 
 
+#: The loop thread's scheduling, the same parameter on every loop node.
+REALTIME_PRIORITY = ParamSpec(
+    "realtime_priority",
+    "int",
+    0,
+    "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+    minimum=0,
+)
+
+
 def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, object]:
     """Declare every parameter on ``node`` and return the checked values by name.
 

@@ -24,7 +24,7 @@ from manip_kin.joint_integration import integrate_joint_rates
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import LiveParameters, ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.params import REALTIME_PRIORITY, LiveParameters, ParamSpec, declare_parameters, usage_text
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
@@ -75,13 +75,7 @@ PARAMETERS = (
     ParamSpec("tf_rate_hz", "float", 50.0, "rate of /tf (where tf2_msgs is installed)", "Hz", positive=True),
     ParamSpec("markers_rate_hz", "float", 10.0, "rate of the markers topic (0: off)", "Hz", minimum=0.0),
     ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", positive=True),
-    ParamSpec(
-        "realtime_priority",
-        "int",
-        0,
-        "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
-        minimum=0,
-    ),
+    REALTIME_PRIORITY,
 )
 
 USAGE = usage_text(
