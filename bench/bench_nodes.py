@@ -35,10 +35,10 @@ import time
 import numpy as np
 
 TARGETS = {
-    "rate": "1 kHz held, p99 period error ≤ 0.5 ms",
-    "cpu": "≤ 25 % of one core each",
-    "latency": "p99 ≤ 2 ms",
-    "line": "≤ 0.5 mm at 1 kHz",
+    "rate": "1 kHz held, p99 period error ≤ 0.3 ms",
+    "cpu": "≤ 20 % of one core each",
+    "latency": "p99 ≤ 1 ms",
+    "line": "≤ 0.2 mm at 1 kHz, normal scheduling",
 }
 REFERENCE = "MoveIt Servo default cycle 10 ms; one rclpy timer ~0.3 ms p99 at 1 kHz; JointState IPC ~0.2 ms p50"
 
