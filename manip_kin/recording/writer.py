@@ -32,7 +32,20 @@ from manip_kin.recording.msgdef import (
     normalize_type_name,
     type_hash,
 )
+from manip_kin.recording.output_layout import OutputLayout, resolve_output
 from manip_kin.recording.qos import OfferedProfiles, default_offer
+from manip_kin.recording.summary import RecordingSummary, format_bytes
+
+# Names other modules import from here.
+__all__ = [
+    "COMPRESSION_CHOICES",
+    "OutputLayout",
+    "RecordingSummary",
+    "RecordingWriter",
+    "format_bytes",
+    "resolve_output",
+    "type_name_of",
+]
 
 MCAP_PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -46,47 +59,6 @@ _COMPRESSIONS = {
     "none": CompressionType.NONE,
 }
 COMPRESSION_CHOICES = tuple(_COMPRESSIONS)
-
-
-@dataclass(frozen=True)
-class OutputLayout:
-    """Where a recording goes.
-
-    Attributes:
-        mcap_path: the MCAP file written.
-        bag_directory: the bag directory, or None for a single ``.mcap`` file.
-    """
-
-    mcap_path: Path
-    bag_directory: Path | None
-
-
-def resolve_output(output: str | Path, overwrite: bool = True) -> OutputLayout:
-    """Turn an ``output`` argument into file paths (and create parent directories).
-
-    Args:
-        output: ``something.mcap`` for a single file, anything else for a bag directory.
-        overwrite: replace an existing ``.mcap`` file; a non-empty bag directory is
-            never reused (as rosbag2 refuses it), since it may hold another recording.
-
-    Raises:
-        RecordingError: when the path cannot be used.
-    """
-    path = Path(output).expanduser()
-    if path.suffix == ".mcap":
-        if path.is_dir():
-            raise RecordingError(f"output {str(path)!r} is a directory; a .mcap output must be a file")
-        if path.exists() and not overwrite:
-            raise RecordingError(f"output {str(path)!r} exists; choose another path or delete it")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return OutputLayout(path, None)
-    if path.exists() and (not path.is_dir() or any(path.iterdir())):
-        raise RecordingError(
-            f"output {str(path)!r} exists and is not an empty directory; give a new bag "
-            "directory name or a path ending in .mcap"
-        )
-    path.mkdir(parents=True, exist_ok=True)
-    return OutputLayout(path / f"{path.name}_0.mcap", path)
 
 
 def type_name_of(message_class: type) -> str:
@@ -105,52 +77,6 @@ class _Topic:
     header_first: bool
     message_count: int = 0
     sequence: int = 0
-
-
-@dataclass(frozen=True)
-class RecordingSummary:
-    """What a closed recording holds.
-
-    Attributes:
-        path: the bag directory, or the ``.mcap`` file.
-        mcap_path: the MCAP file.
-        topic_counts: messages per topic (topics without messages included).
-        message_count: all messages.
-        message_bytes: CDR bytes of all messages (before compression).
-        file_bytes: size of the MCAP file.
-        start_ns, end_ns: first and last receive time, ns since the epoch (0 when empty).
-    """
-
-    path: Path
-    mcap_path: Path
-    topic_counts: dict[str, int]
-    message_count: int
-    message_bytes: int
-    file_bytes: int
-    start_ns: int
-    end_ns: int
-
-    @property
-    def duration_s(self) -> float:
-        """Seconds between the first and last message."""
-        return (self.end_ns - self.start_ns) / 1e9 if self.message_count else 0.0
-
-    def one_line(self) -> str:
-        """``recorded 3 topics, 1200 messages, 56.1 KiB in 1.20 s to runs/x.mcap``."""
-        return (
-            f"recorded {len(self.topic_counts)} topics, {self.message_count} messages, "
-            f"{format_bytes(self.file_bytes)} in {self.duration_s:.2f} s to {self.path}"
-        )
-
-
-def format_bytes(size: int) -> str:
-    """Human size with binary units (``1.5 MiB``)."""
-    value = float(size)
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if value < 1024 or unit == "GiB":
-            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
-        value /= 1024
-    return f"{size} B"
 
 
 class RecordingWriter:
