@@ -33,6 +33,8 @@ from manip_kin.recording import tf_message
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, encode_tf_message
 from manip_kin.tf_tree import LinkTree, StampDecimator, moving_transforms, static_transforms
 
+MARKERS_DEPTH = 100
+
 GOAL_AXIS_LENGTH = 0.1  # [m]
 LINE_WIDTH = 0.006  # [m]
 JOINT_SPHERE_DIAMETER = 0.08  # [m]
@@ -105,7 +107,9 @@ class RobotVisuals:
         self._goal: PoseStamped | None = None
         self._path: Path | None = None
         if self._markers_period_ns:
-            self._markers_pub = node.create_publisher(MarkerArray, "markers", 10)
+            # Several seconds of marker arrays (they go out a namespace per cycle): a recorder
+            # that falls behind for a moment loses none (a reliable writer drops the oldest).
+            self._markers_pub = node.create_publisher(MarkerArray, "markers", MARKERS_DEPTH)
             self._goal_sub = PolledSubscription(node, PoseStamped, "goal_pose", 10)
             self._path_sub = PolledSubscription(node, Path, "planned_path", LATCHED)
 
