@@ -33,7 +33,7 @@ from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
-from manip_kin.nodes.topics import STREAM_DEPTH
+from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
 
 
@@ -58,7 +58,7 @@ class CartesianControllerNode(LoopingNode):
         self._goal_stream_gap_ns = int(5e9 / self.rate_hz)  # goals closer than 5 periods: a stream
         self._goal_arrival_ns = 0
 
-        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 10)
+        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", latest_state_qos(10))
         self._goal_sub = PolledSubscription(self, PoseStamped, "goal_pose", 10)
         self._twist_sub = PolledSubscription(self, TwistStamped, "goal_twist", 10)
         self._reference_sub = PolledSubscription(self, JointState, "joint_reference", 10)

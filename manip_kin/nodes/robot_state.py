@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import sys
 import time
+from operator import mul
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -28,7 +29,7 @@ from manip_kin.nodes.params import REALTIME_PRIORITY, LiveParameters, ParamSpec,
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
-from manip_kin.nodes.topics import STREAM_DEPTH
+from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.nodes.visuals import RobotVisuals
 from manip_kin.robots import bundled_robot_names
 from manip_kin.urdf import model_to_urdf
@@ -159,7 +160,7 @@ class JointIntegrator:
         tool = values[:16]
         qdot = self.qdot_values
         # Twist of the tool (ee when no tool) = J q̇, J rows [angular; linear] after the pose.
-        twist = [sum(values[16 + r * n + c] * qdot[c] for c in range(n)) for r in range(6)]
+        twist = [sum(map(mul, values[16 + r * n : 16 + (r + 1) * n], qdot)) for r in range(6)]
         self.tool_values = tool
         self.tool_twist_values = twist
         if self._ee_chain is None:
@@ -241,7 +242,7 @@ class RobotStateNode(LoopingNode):
         LiveParameters(self, PARAMETERS, self._set_parameters)
 
         self._max_command = InputBounds.of(self.model).max_command
-        self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", 10)
+        self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", latest_state_qos(10))
         self._joint_state_pub = self.create_publisher(JointState, "joint_states", STREAM_DEPTH)
         self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", STREAM_DEPTH)
         self._tool_pose_pub = self.create_publisher(PoseStamped, "tool_pose", STREAM_DEPTH)

@@ -42,7 +42,7 @@ from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
-from manip_kin.nodes.topics import STREAM_DEPTH
+from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.nodes.trajectory_generator_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
 from manip_kin.supervisors import GeneratorState, GeneratorSupervisor
 from manip_kin.tasks import parse_task
@@ -68,8 +68,8 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
         # not turning 2 kHz of state messages into Python objects keeps this loop cheap.
-        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "tool_pose", 1)
-        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", 1)
+        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "tool_pose", latest_state_qos(1))
+        self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", latest_state_qos(1))
         self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", STREAM_DEPTH)
         self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", STREAM_DEPTH)
         self._reference_pub = self.create_publisher(JointState, "joint_reference", STREAM_DEPTH)

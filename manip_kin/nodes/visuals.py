@@ -28,6 +28,7 @@ from manip_kin.bounds import InputBounds
 from manip_kin.model import RobotModel
 from manip_kin.nodes.conversions import ns_to_stamp, pose_to_matrix
 from manip_kin.nodes.rate_loop import PolledSubscription
+from manip_kin.nodes.topics import latest_state_qos
 from manip_kin.nodes.validation import pose_problem
 from manip_kin.recording import tf_message
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, encode_tf_message
@@ -110,7 +111,7 @@ class RobotVisuals:
             # Several seconds of marker arrays (they go out a namespace per cycle): a recorder
             # that falls behind for a moment loses none (a reliable writer drops the oldest).
             self._markers_pub = node.create_publisher(MarkerArray, "markers", MARKERS_DEPTH)
-            self._goal_sub = PolledSubscription(node, PoseStamped, "goal_pose", 10)
+            self._goal_sub = PolledSubscription(node, PoseStamped, "goal_pose", latest_state_qos(10))
             self._path_sub = PolledSubscription(node, Path, "planned_path", LATCHED)
 
     def publish_static(self, stamp_ns: int) -> None:
