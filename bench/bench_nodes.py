@@ -100,7 +100,7 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     q = client.current_positions()
     pose, jac = pose_and_jacobian_in_base(model, q, model.frame_index("tool"))
     z_row = jac[5]
-    from manip_kin.nodes.rate_loop import PolledSubscription
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, PolledSubscription, _set_timer_slack
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
     # this thread gets the same priority, or the measurement would wait behind them.
@@ -110,6 +110,8 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
         except OSError:
             pass
     commands = PolledSubscription(client.node, Float64MultiArray, "joint_velocity_commands", 100)
+    # Poll in 20 µs steps, not 20 µs + the default 50 µs timer slack.
+    _set_timer_slack(TIMER_SLACK_NS)
     client.spin_for(0.5)
     publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "goal_pose")
     latencies = []
