@@ -150,6 +150,87 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     }
 
 
+def _echo(seconds: float) -> None:
+    """The far end of :func:`_round_trip_row`: returns every ``ping`` on ``pong`` at once."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from manip_kin.nodes.polling import LoopWaiter, PolledSubscription
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, _set_timer_slack
+
+    rclpy.init()
+    node = rclpy.create_node("bench_echo")
+    pings = PolledSubscription(node, Float64MultiArray, "ping", 10)
+    pongs = node.create_publisher(Float64MultiArray, "pong", 10)
+    waiter = LoopWaiter(node, [pings])  # how a node's loop waits for a goal
+    _set_timer_slack(TIMER_SLACK_NS)
+    end = time.monotonic() + seconds
+    try:
+        while time.monotonic() < end and rclpy.ok():
+            waiter.wait(1_000_000)
+            while (data := pings.take(raw=True)) is not None:
+                pongs.publish(data)
+    except Exception:  # noqa: BLE001 - terminated (SIGTERM shuts the context down): just end
+        pass
+
+
+def _round_trip_row(trials: int = 300) -> dict:
+    """The floor under the goal-to-command latency: a message to another Python process and back.
+
+    The same path as a goal and its command (rclpy, the middleware, the node's wait set, the
+    polled reply), with no work in between: two hops of inter-process delivery.
+    """
+    import subprocess
+
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from manip_kin.nodes.polling import PolledSubscription
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, _set_timer_slack
+
+    echo = subprocess.Popen([sys.executable, __file__, "echo", str(trials * 0.02 + 15)])
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("bench_ping", context=context)
+    latencies = []
+    try:
+        pings = node.create_publisher(Float64MultiArray, "ping", 10)
+        pongs = PolledSubscription(node, Float64MultiArray, "pong", 10)
+        _set_timer_slack(TIMER_SLACK_NS)
+        deadline = time.monotonic() + 10
+        while pings.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        for trial in range(trials):
+            sent = time.monotonic_ns()
+            pings.publish(Float64MultiArray(data=[float(trial)]))
+            while time.monotonic_ns() - sent < 500_000_000:
+                if pongs.take(raw=True) is not None:
+                    latencies.append((time.monotonic_ns() - sent) * 1e-6)
+                    break
+                time.sleep(20e-6)
+            time.sleep(0.01)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        echo.terminate()
+        try:
+            echo.wait(5)
+        except subprocess.TimeoutExpired:
+            echo.kill()
+            echo.wait()
+    values = np.array(latencies) if latencies else np.array([math.nan])
+    return {
+        "metric": "inter-process round trip (ping to a Python process and back), no work in between",
+        "p50_ms": float(np.percentile(values, 50)),
+        "p99_ms": float(np.percentile(values, 99)),
+        "max_ms": float(values.max()),
+        "trials": len(latencies),
+        "target": "(the floor under the goal-to-command latency: two such hops)",
+        "reference": "same transport, wait set and polling as the nodes",
+    }
+
+
 def _line_row(rate_hz: float, priority: int) -> dict:
     from geometry_msgs.msg import PoseStamped
 
@@ -260,7 +341,7 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
     from manip_kin.pipeline import ensure_ros_isolation
 
     ensure_ros_isolation()
-    rows: list[dict] = []
+    rows: list[dict] = [_round_trip_row()]
     for priority in priorities:
         for rate_hz in (500.0, 1000.0):
             rows += _loop_rows(rate_hz, priority)
@@ -270,7 +351,10 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
 
 
 if __name__ == "__main__":
-    # ``bench_nodes.py two``: only the two-pipeline figures.
+    # ``bench_nodes.py two``: only the two-pipeline figures; ``echo SECONDS``: the far end of the round trip.
+    if sys.argv[1:2] == ["echo"]:
+        _echo(float(sys.argv[2]))
+        sys.exit(0)
     results = run_two_pipeline_benchmarks() if sys.argv[1:] == ["two"] else run_node_benchmarks()
     json.dump(results, sys.stdout, indent=1)
     sys.stdout.write("\n")
