@@ -35,6 +35,7 @@ from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
     _cholesky_body,
     _determinant_and_trace,
+    _inverse_trace_lines,
     _product,
     _sum,
     chain_constants,
@@ -144,12 +145,10 @@ def step_source(
     may also raise on a wrong ``q`` length). ``lower``/``upper`` None skip the position
     limits, ``inverse_velocity_limits`` None the velocity scaling.
 
-    The common case runs inline: the undamped solve, certified by an eigenvalue bound of
-    ``J Jᵀ`` (σ_min² >= ``epsilon_sq``). When the bound fails, the exact eigenvalues
-    (``EIGENVALUES``) give σ_min and the damping rule, and a shifted solve runs, inline too;
-    a Cholesky pivot that is not positive (an exact singularity) hands over to
-    ``SOLVE(values, b)`` (:meth:`manip_kin.damped_least_squares.DampedSolver.solve`); when a
-    joint would cross a position limit it calls
+    The common case runs inline: the undamped solve, certified by the eigenvalue bounds of
+    ``J Jᵀ`` (σ_min² >= ``epsilon_sq``). When the certificate fails the step calls
+    ``SOLVE(values, b)`` (:meth:`manip_kin.damped_least_squares.DampedSolver.solve`: exact
+    σ_min and the damping rule); when a joint would cross a position limit it calls
     ``REDISTRIBUTE(q, values, b, qdot, dt, damping, singular)`` (the SNS step of
     :class:`manip_kin.control.CartesianController`). Both are given when compiling.
     """
@@ -177,14 +176,20 @@ def step_source(
     lines.append("    for _ in ONCE:")
     lines += ["    " + line.replace("return None", "continue") for line in body]
     lines.append(f"        DET, TR = {_determinant_and_trace(m, shifted=False)}")
-    # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) (see
-    # unrolled_linalg.smallest_eigenvalue_bound); when it cannot be, the exact eigenvalues
-    # decide. (A second certificate in between, 1/tr((JJᵀ)⁻¹), saved regular steps nothing
-    # measurable and cost every step near a singularity ~2 µs, ~10 %: measured on genova7.)
+    # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) when the eigenvalues
+    # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops); see
+    # unrolled_linalg.smallest_eigenvalue_bound.
     lines.append("        MANIPULABILITY = sqrt(DET)")
     if m > 1:
+        # λ_min <= every Cholesky pivot (a pivot is a Schur complement, and eigenvalues
+        # interlace): a pivot below ε² proves a singularity without the inverse trace.
+        pivots = " or ".join(f"p{j} < {epsilon_sq!r}" for j in range(m))
         lines.append(f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
-        lines.append("            if True:")
+        lines.append(f"            UNCERTIFIED = {pivots}")
+        lines.append("            if not UNCERTIFIED:")
+        lines += ["            " + line for line in _inverse_trace_lines(m)]
+        lines.append(f"                UNCERTIFIED = inverse_trace * {epsilon_sq!r} > 1.0")
+        lines.append("            if UNCERTIFIED:")
     else:
         lines += [f"        if DET < {epsilon_sq!r}:", "            if True:"]
     # Possibly near a singularity: σ_min² from the eigenvalues of J Jᵀ (the a's above), the
