@@ -57,14 +57,20 @@ def _cpu_seconds(pid: int) -> float:
 
 
 class JointStateCounter:
-    """Drains ``/joint_states`` (raw CDR) in its own thread; keeps arrival times and stamps."""
+    """Drains ``/joint_states`` (raw CDR) in its own thread; keeps arrival times and stamps.
+
+    Best effort: a reliable reader would cost robot_state a middleware wake-up per message
+    (see ``nodes/topics.py``), which this observer should not add to what it measures. What
+    it sees is a sample; each message it sees must be in the recording.
+    """
 
     def __init__(self, node):
         from sensor_msgs.msg import JointState
 
         from manip_kin.nodes.polling import PolledSubscription
+        from manip_kin.nodes.topics import latest_state_qos
 
-        self._sub = PolledSubscription(node, JointState, "/joint_states", 2000)
+        self._sub = PolledSubscription(node, JointState, "/joint_states", latest_state_qos(2000))
         self.arrivals: list[int] = []
         self.stamps: list[int] = []
         self._stop = threading.Event()
