@@ -1,6 +1,8 @@
 """Node plumbing without ROS traffic: the rate loop, log throttling, parameter checks, --help."""
 
+import signal
 import subprocess
+import sys
 import sysconfig
 import threading
 import time
@@ -12,6 +14,7 @@ import pytest
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.nodes.params import ParamSpec
 from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, RateLoop, ThrottledLog
+from manip_kin.nodes.runner import TEARDOWN_TIMEOUT_S
 
 
 def test_rate_loop_runs_at_rate_survives_errors_and_stops():
@@ -122,3 +125,44 @@ def test_bad_parameter_exits_2_with_one_line():
     assert result.returncode == 2
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "nosuchbot" in errors[0]
+
+
+HANGING_TEARDOWN = """
+import sys, time
+from rclpy.node import Node
+from manip_kin.nodes.runner import run_node
+
+class HangingTeardown(Node):
+    def __init__(self):
+        super().__init__("hanging_teardown")
+        self.timer = self.create_timer(0.01, self.ready)  # runs once the executor spins
+
+    def ready(self):
+        self.timer.cancel()
+        print("ready", flush=True)
+
+    def destroy_node(self):
+        time.sleep(60)  # middleware teardown that never ends
+
+sys.exit(run_node(HangingTeardown, "usage", ["hanging_teardown"]))
+"""
+
+
+def test_a_node_whose_teardown_hangs_still_exits_with_its_code():
+    process = subprocess.Popen(
+        [sys.executable, "-c", HANGING_TEARDOWN], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert process.stdout.readline().strip() == "ready"
+        process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        # The watchdog fires TEARDOWN_TIMEOUT_S (3 s) after the node stopped; 30 s leaves a loaded
+        # machine room and is still half the hang, so a process without the watchdog fails here.
+        code = process.wait(30)
+        waited = time.monotonic() - signalled
+    finally:
+        process.kill()
+        process.wait()
+    assert code == 0, process.stderr.read()
+    assert waited >= TEARDOWN_TIMEOUT_S
+    assert f"shutting down took more than {TEARDOWN_TIMEOUT_S:g} s" in process.stderr.read()

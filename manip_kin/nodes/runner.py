@@ -8,7 +8,9 @@ node can finish its work (a recorder closes its file), then a clean shutdown.
 
 from __future__ import annotations
 
+import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 
 from rclpy.node import Node
@@ -28,6 +30,35 @@ def wants_help(argv: Sequence[str], usage: str) -> bool:
         print(usage)
         return True
     return False
+
+
+#: Seconds the middleware teardown (node destruction, rclpy shutdown, interpreter exit) may
+#: take once the node has finished its own work; then the process exits anyway.
+TEARDOWN_TIMEOUT_S = 3.0
+
+
+def _exit_if_teardown_hangs(exit_code: int, timeout_s: float = TEARDOWN_TIMEOUT_S) -> None:
+    """Exit with ``exit_code`` if the process is still alive ``timeout_s`` from now.
+
+    Seen once in a loaded test run: a node whose loop had stopped did not exit within 7 s of
+    SIGINT and SIGTERM and was SIGKILLed, so its supervisor saw -9 instead of 0. The node's
+    own work (a recorder closing its file) is done before this starts; what is left is
+    middleware teardown, which is not worth a hung process.
+    """
+
+    def give_up() -> None:
+        try:
+            print(
+                f"warning: shutting down took more than {timeout_s:g} s after the node stopped; exiting",
+                file=sys.stderr,
+                flush=True,
+            )
+        finally:
+            os._exit(exit_code)
+
+    timer = threading.Timer(timeout_s, give_up)
+    timer.daemon = True
+    timer.start()
 
 
 def run_node(
@@ -72,6 +103,7 @@ def run_node(
         return 2
     node = None
     exit_code = 0
+    teardown_code = 1  # the exit code if teardown hangs: 1 unless spin ended as it should
     try:
         try:
             node = make_node()
@@ -86,9 +118,9 @@ def run_node(
         except Exception as error:  # noqa: BLE001 - anything else: say why, exit non-zero
             print(f"error: the node could not start: {type(error).__name__}: {error}", file=sys.stderr)
             return 1
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        try:
+        try:  # a signal may land before spin() starts: the same clean stop
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
@@ -100,10 +132,12 @@ def run_node(
             # raises RCLError ("context is not valid") instead of ExternalShutdownException.
             if node.context.ok():
                 raise
+        teardown_code = exit_code
     finally:
         if node is not None:
             if on_shutdown is not None:
                 on_shutdown(node)
+            _exit_if_teardown_hangs(teardown_code)
             node.destroy_node()
         rclpy.try_shutdown()
     return exit_code
