@@ -156,6 +156,8 @@ def test_a_node_whose_teardown_hangs_still_exits_with_its_code():
         assert process.stdout.readline().strip() == "ready"
         process.send_signal(signal.SIGINT)
         signalled = time.monotonic()
+        # What the pipeline supervisor sends before a SIGKILL: the threads' stacks, to stderr.
+        process.send_signal(signal.SIGUSR1)
         # The watchdog fires TEARDOWN_TIMEOUT_S (3 s) after the node stopped; 30 s leaves a loaded
         # machine room and is still half the hang, so a process without the watchdog fails here.
         code = process.wait(30)
@@ -165,4 +167,6 @@ def test_a_node_whose_teardown_hangs_still_exits_with_its_code():
         process.wait()
     assert code == 0, process.stderr.read()
     assert waited >= TEARDOWN_TIMEOUT_S
-    assert f"shutting down took more than {TEARDOWN_TIMEOUT_S:g} s" in process.stderr.read()
+    stderr = process.stderr.read()
+    assert f"shutting down took more than {TEARDOWN_TIMEOUT_S:g} s" in stderr
+    assert "most recent call first" in stderr and "in run_node" in stderr, stderr

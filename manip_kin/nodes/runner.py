@@ -8,7 +8,9 @@ node can finish its work (a recorder closes its file), then a clean shutdown.
 
 from __future__ import annotations
 
+import faulthandler
 import os
+import signal
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -61,6 +63,15 @@ def _exit_if_teardown_hangs(exit_code: int, timeout_s: float = TEARDOWN_TIMEOUT_
     timer.start()
 
 
+def _ignore_signals() -> None:
+    """SIGINT and SIGTERM ignored from now on, at the Python level (the node is stopping)."""
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(signal_number, signal.SIG_IGN)
+        except (ValueError, OSError):  # not the main thread (a test harness): nothing to do
+            pass
+
+
 def run_node(
     make_node: Callable[[], Node],
     usage: str,
@@ -92,6 +103,9 @@ def run_node(
     argv = list(sys.argv if argv is None else argv)
     if wants_help(argv, usage):
         return 0
+    # SIGUSR1 writes every thread's Python stack to stderr (the node's log): what a supervisor
+    # asks for before it SIGKILLs a node that did not stop (manip_kin.pipeline does).
+    faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
     # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin().
     try:
         rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
@@ -118,23 +132,32 @@ def run_node(
         except Exception as error:  # noqa: BLE001 - anything else: say why, exit non-zero
             print(f"error: the node could not start: {type(error).__name__}: {error}", file=sys.stderr)
             return 1
-        try:  # a signal may land before spin() starts: the same clean stop
-            executor = SingleThreadedExecutor()
-            executor.add_node(node)
-            executor.spin()
-        except (KeyboardInterrupt, ExternalShutdownException):
+        try:
+            try:  # a signal may land before spin() starts: the same clean stop
+                executor = SingleThreadedExecutor()
+                executor.add_node(node)
+                executor.spin()
+            except (KeyboardInterrupt, ExternalShutdownException):
+                pass
+            except LoopGaveUpError as error:
+                print(f"error: {node.get_name()} gave up: {error}", file=sys.stderr)
+                exit_code = 1
+            except Exception:
+                # A signal's context shutdown can land while spin() builds its wait set, which then
+                # raises RCLError ("context is not valid") instead of ExternalShutdownException.
+                if node.context.ok():
+                    raise
+        except KeyboardInterrupt:
+            # One SIGINT ends spin() twice: rclpy's handler shuts the context down (the
+            # ExternalShutdownException above) and chains to Python's, whose KeyboardInterrupt
+            # comes at the next bytecode, possibly inside the handler above. Seen in a test.
             pass
-        except LoopGaveUpError as error:
-            print(f"error: {node.get_name()} gave up: {error}", file=sys.stderr)
-            exit_code = 1
-        except Exception:
-            # A signal's context shutdown can land while spin() builds its wait set, which then
-            # raises RCLError ("context is not valid") instead of ExternalShutdownException.
-            if node.context.ok():
-                raise
         teardown_code = exit_code
     finally:
         if node is not None:
+            # From here on a signal must not interrupt the cleanup (a recorder finishing its
+            # file, the loop thread's join): Python-level handlers off; a pending one is dropped.
+            _ignore_signals()
             if on_shutdown is not None:
                 on_shutdown(node)
             _exit_if_teardown_hangs(teardown_code)

@@ -276,6 +276,9 @@ class Pipeline:
     def stop_process(self, name: str, timeout: float = 5.0, sig: int | None = signal.SIGINT) -> int | None:
         """Stop one process: ``sig`` (SIGINT), then SIGTERM, then SIGKILL; returns its exit code.
 
+        Before the SIGKILL it sends SIGUSR1: a manip_kin node then writes its threads' Python
+        stacks to its log (``faulthandler``), so a node that would not stop says where it hung.
+
         ``sig=None`` only waits ``timeout`` before escalating (the caller already signalled).
         """
         popen = self._popen.get(name)
@@ -284,6 +287,11 @@ class Pipeline:
         if popen.poll() is None:
             for signal_number, wait in ((sig, timeout), (signal.SIGTERM, 2.0), (signal.SIGKILL, 5.0)):
                 try:
+                    if signal_number == signal.SIGKILL and sig != signal.SIGKILL:
+                        # Still alive after SIGINT and SIGTERM: ask for its threads' stacks first
+                        # (the nodes register SIGUSR1 with faulthandler), so the log says where it hung.
+                        popen.send_signal(signal.SIGUSR1)
+                        time.sleep(0.5)
                     if signal_number is not None:
                         popen.send_signal(signal_number)
                 except ProcessLookupError:
