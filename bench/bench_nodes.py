@@ -10,6 +10,9 @@
   current tool pose; the latency is from just before ``publish`` of a goal to the arrival
   (in this process, polled without an executor) of the first ``/joint_velocity_commands``
   whose tool z velocity has the new sign;
+* the floor under that latency: a round trip to another Python process and back with the
+  nodes' transport and wait set and no work in between, on the idle machine and beside the
+  1 kHz pipeline;
 * maximum distance of the tool from the straight segment during the irb120 line of
   scenario (b) at 0.4 m/s, 1 kHz;
 * two full pipelines side by side on one domain (genova7 in ``/left``, irb120 in
@@ -84,6 +87,8 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0) -> list[dict]
             row["reference"] = REFERENCE
             rows.append(row)
         if rate_hz >= 1000:
+            # The floor under the latency, measured while the same nodes load the machine.
+            rows.append(_round_trip_row(label=f"beside the pipeline at {label}"))
             rows.append(_latency_row(pipeline, label, priority))
     return rows
 
@@ -98,9 +103,10 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     model = load_robot("genova7")
     client = pipeline.client()
     q = client.current_positions()
+    client.unwatch_state()  # the measurement reads only the commands
     pose, jac = pose_and_jacobian_in_base(model, q, model.frame_index("tool"))
     z_row = jac[5]
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, PolledSubscription, _set_timer_slack
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, PolledSubscription, set_timer_slack
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
     # this thread gets the same priority, or the measurement would wait behind them.
@@ -111,7 +117,7 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
             pass
     commands = PolledSubscription(client.node, Float64MultiArray, "joint_velocity_commands", 100)
     # Poll in 20 µs steps, not 20 µs + the default 50 µs timer slack.
-    _set_timer_slack(TIMER_SLACK_NS)
+    set_timer_slack(TIMER_SLACK_NS)
     client.spin_for(0.5)
     publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "goal_pose")
     latencies = []
@@ -156,14 +162,14 @@ def _echo(seconds: float) -> None:
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.nodes.polling import LoopWaiter, PolledSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, _set_timer_slack
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
 
     rclpy.init()
     node = rclpy.create_node("bench_echo")
     pings = PolledSubscription(node, Float64MultiArray, "ping", 10)
     pongs = node.create_publisher(Float64MultiArray, "pong", 10)
     waiter = LoopWaiter(node, [pings])  # how a node's loop waits for a goal
-    _set_timer_slack(TIMER_SLACK_NS)
+    set_timer_slack(TIMER_SLACK_NS)
     end = time.monotonic() + seconds
     try:
         while time.monotonic() < end and rclpy.ok():
@@ -174,11 +180,12 @@ def _echo(seconds: float) -> None:
         pass
 
 
-def _round_trip_row(trials: int = 300) -> dict:
+def _round_trip_row(trials: int = 300, label: str = "idle machine") -> dict:
     """The floor under the goal-to-command latency: a message to another Python process and back.
 
     The same path as a goal and its command (rclpy, the middleware, the node's wait set, the
-    polled reply), with no work in between: two hops of inter-process delivery.
+    polled reply), with no work in between: two hops of inter-process delivery. ``label``
+    says what else runs (the latency itself is measured beside a running pipeline).
     """
     import subprocess
 
@@ -186,7 +193,7 @@ def _round_trip_row(trials: int = 300) -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.nodes.polling import PolledSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, _set_timer_slack
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
 
     echo = subprocess.Popen([sys.executable, __file__, "echo", str(trials * 0.02 + 15)])
     context = rclpy.Context()
@@ -196,7 +203,7 @@ def _round_trip_row(trials: int = 300) -> dict:
     try:
         pings = node.create_publisher(Float64MultiArray, "ping", 10)
         pongs = PolledSubscription(node, Float64MultiArray, "pong", 10)
-        _set_timer_slack(TIMER_SLACK_NS)
+        set_timer_slack(TIMER_SLACK_NS)
         deadline = time.monotonic() + 10
         while pings.get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
@@ -221,7 +228,7 @@ def _round_trip_row(trials: int = 300) -> dict:
             echo.wait()
     values = np.array(latencies) if latencies else np.array([math.nan])
     return {
-        "metric": "inter-process round trip (ping to a Python process and back), no work in between",
+        "metric": f"inter-process round trip (ping to a Python process and back), no work in between, {label}",
         "p50_ms": float(np.percentile(values, 50)),
         "p99_ms": float(np.percentile(values, 99)),
         "max_ms": float(values.max()),

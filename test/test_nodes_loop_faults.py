@@ -263,6 +263,56 @@ def test_rate_loop_survives_a_raising_handler_and_waiter_and_wakes_early():
     assert loop.last_error.startswith("ValueError: cycle")
 
 
+def test_rate_loop_reacts_to_a_wake_at_once_and_rate_limits_a_flood():
+    """A wake after a regular cycle runs a cycle at once (a new goal's reaction time); wakes
+    that keep coming are held to half a period apart (at most twice the rate)."""
+    import time
+
+    from manip_kin.nodes.rate_loop import RateLoop
+
+    period_s = 0.05  # 20 Hz: half a period is 25 ms, far above a loaded machine's wake-up delay
+    starts = []
+    wakes = []  # (time the waiter returned True, cycles started before)
+    regular_since_wake = [0]
+
+    def cycle(now_ns):
+        starts.append(now_ns)
+
+    def wait(timeout_ns):
+        if len(starts) < 3 or regular_since_wake[0] < 2:
+            # Regular cycles: sleep to the deadline.
+            time.sleep(max(timeout_ns, 0) * 1e-9)
+            regular_since_wake[0] += 1
+            return False
+        if len(wakes) % 4 == 0:
+            time.sleep(0.002)  # a goal 2 ms after a regular cycle
+        wakes.append((time.monotonic_ns(), len(starts)))
+        if len(wakes) % 4 == 0:
+            regular_since_wake[0] = 0  # then back to regular cycles
+        return True  # three more wakes at once: a flood
+
+    loop = RateLoop(1 / period_s, cycle, wait=wait, give_up_after=0.0)
+    loop.start()
+    deadline = time.monotonic() + 20
+    while len(wakes) < 12 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    loop.stop()
+    assert len(wakes) >= 12
+    half_ns = period_s / 2 * 1e9
+    for index, (woken_ns, before) in enumerate(wakes[:12]):
+        reaction_ns = starts[before] - woken_ns
+        if index % 4 == 0:
+            # First wake after regular cycles: at once. 12 ms is half of what the old rule
+            # (half a period since the last start) would have added here, and well above a
+            # loaded 2-core machine's scheduling delay.
+            assert reaction_ns < 12e6, (index, reaction_ns)
+        else:
+            # A wake right after a woken cycle: held to half a period after it (a lower bound:
+            # load can only make it later).
+            assert starts[before] - starts[before - 1] >= half_ns, (index, starts[before] - starts[before - 1])
+    assert loop.stats().woken >= 12
+
+
 def test_rate_loop_gives_up_when_the_rate_cannot_be_kept():
     import time
 

@@ -56,6 +56,19 @@ def test_goal_wait_reaches_genova7_pose_goal(genova):
     np.testing.assert_allclose(tool[:3, :3], GENOVA_GOAL[:3, :3], atol=2e-3)
 
 
+def test_client_unwatch_state_drops_its_readers(genova):
+    """The bench drops the client's 1 kHz state readers while it measures: they must go."""
+    client = genova.client()
+    client.current_positions()
+    topics = [client.topic("joint_states"), client.topic("tool_pose")]
+    before = [client.node.count_subscribers(topic) for topic in topics]
+    client.unwatch_state()
+    assert client.spin_until(
+        lambda: [client.node.count_subscribers(topic) for topic in topics] == [n - 1 for n in before], 5
+    ), ([client.node.count_subscribers(topic) for topic in topics], before)
+    assert client.current_positions().shape == (7,)  # watching again works
+
+
 def test_bad_messages_rejected_while_pipeline_runs(genova):
     client = genova.client()
     nan_goal = conv.make_pose_stamped(GENOVA_GOAL, "base_link")

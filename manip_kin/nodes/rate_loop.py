@@ -19,7 +19,9 @@ Design notes:
       2-core machine (measured: 972-984 Hz per 30 s window in a 10-minute soak);
     * a waiter (:class:`~manip_kin.nodes.polling.LoopWaiter`) can end the sleep early when
       a message that needs an immediate reaction arrives (a new goal): the cycle runs at
-      once and the schedule re-anchors on it;
+      once and the schedule re-anchors on it; a second wake within half a period of a woken
+      cycle waits for that half period, so a flood of wakes cannot run the loop faster
+      than twice its rate;
     * no exception ends the loop: a failing cycle is counted and handed to ``on_error``
       (guarded too), and the next cycle runs. Only a loop that cannot do its job for
       seconds on end (rate far below target, or every cycle failing) calls ``on_fatal``
@@ -45,7 +47,9 @@ __all__ = [
     "LoopStats",
     "PolledSubscription",
     "RateLoop",
+    "TIMER_SLACK_NS",
     "ThrottledLog",
+    "set_timer_slack",
     "stats_key_values",
 ]
 
@@ -89,7 +93,7 @@ TIMER_SLACK_NS = 1_000
 _PR_SET_TIMERSLACK = 29  # prctl option, linux/prctl.h
 
 
-def _set_timer_slack(slack_ns: int) -> bool:
+def set_timer_slack(slack_ns: int) -> bool:
     """Set the calling thread's timer slack (Linux); False where that is not possible."""
     try:
         import ctypes
@@ -178,8 +182,9 @@ class RateLoop:
         """True while the loop thread is alive."""
         return self._thread is not None and self._thread.is_alive()
 
-    def _set_priority(self) -> None:
-        _set_timer_slack(TIMER_SLACK_NS)
+    def _configure_thread(self) -> None:
+        """Timer slack and, when asked for, SCHED_FIFO priority of the loop thread (it calls this)."""
+        set_timer_slack(TIMER_SLACK_NS)
         if self.realtime_priority <= 0:
             return
         try:
@@ -189,18 +194,16 @@ class RateLoop:
             self.realtime_error = f"SCHED_FIFO priority {self.realtime_priority} not set: {error}"
 
     def _run(self) -> None:
-        self._set_priority()
+        self._configure_thread()
         period = self.period_ns
         half = period // 2
-        # rclcpp::Rate's rule: a cycle less than a full period late keeps the schedule (the
-        # next ones catch up), one later than that re-anchors it.
-        late_limit = period
         window = self._periods_ns.shape[0]
         stop = self._stop
         wait = self._wait
         clock = time.monotonic_ns
         deadline = clock() + period
         last_start = 0
+        last_woken = False
         # Health over one-second windows: the loop gives up after give_up_after seconds of
         # windows that ran too few cycles or in which every cycle failed.
         health_start = clock()
@@ -210,15 +213,20 @@ class RateLoop:
             try:
                 woken = wait(deadline - clock())
                 start = clock()
-                if woken and last_start and start - last_start < half:
-                    # Woken right after a cycle: keep at least half a period between cycles.
+                if woken and last_woken and start - last_start < half:
+                    # Woken again right after a woken cycle (goals in a burst, or a waiter that
+                    # keeps returning at once): half a period between such cycles bounds the
+                    # rate. The first wake after a regular cycle runs at once: a new goal's
+                    # reaction time.
                     sleep_ns(last_start + half - start)
                     start = clock()
                 if woken:
                     self._woken += 1
                     deadline = start  # re-anchor the schedule on the reacting cycle
-                elif start - deadline > late_limit:
-                    deadline = start  # a whole period late: skip the missed cycles, do not burst
+                elif start - deadline > period:
+                    # rclcpp::Rate's rule: a cycle less than a full period late keeps the schedule
+                    # (the next ones catch up); one later than that re-anchors it, no burst.
+                    deadline = start
                     self._overruns += 1
                 deadline += period
             except Exception as error:  # noqa: BLE001 - a failing waiter must not end the loop
@@ -239,6 +247,7 @@ class RateLoop:
                 self._compute_ns[slot] = end - start
                 self._count += 1
             last_start = start
+            last_woken = woken
             health_cycles += 1
             health_failures += failed
             if end - health_start >= 1_000_000_000:

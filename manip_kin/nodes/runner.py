@@ -42,10 +42,9 @@ TEARDOWN_TIMEOUT_S = 3.0
 def _exit_if_teardown_hangs(exit_code: int, timeout_s: float = TEARDOWN_TIMEOUT_S) -> None:
     """Exit with ``exit_code`` if the process is still alive ``timeout_s`` from now.
 
-    Seen once in a loaded test run: a node whose loop had stopped did not exit within 7 s of
-    SIGINT and SIGTERM and was SIGKILLed, so its supervisor saw -9 instead of 0. The node's
-    own work (a recorder closing its file) is done before this starts; what is left is
-    middleware teardown, which is not worth a hung process.
+    A guard: the node's own work (a recorder closing its file) is done before this starts;
+    what is left is middleware teardown (node destruction, rclpy shutdown, interpreter exit),
+    and a hang there is not worth a process its supervisor has to SIGKILL.
     """
 
     def give_up() -> None:

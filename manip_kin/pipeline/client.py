@@ -145,9 +145,20 @@ class PipelineClient:
         """Subscribe to ``joint_states`` and ``tool_pose`` (once)."""
         if not self._watching:
             joint_state_type, pose_type = self._state_types
-            self.node.create_subscription(joint_state_type, "joint_states", self._on_joint_state, 1)
-            self.node.create_subscription(pose_type, "tool_pose", self._on_tool_pose, 1)
+            self._state_subscriptions = [
+                self.node.create_subscription(joint_state_type, "joint_states", self._on_joint_state, 1),
+                self.node.create_subscription(pose_type, "tool_pose", self._on_tool_pose, 1),
+            ]
             self._watching = True
+
+    def unwatch_state(self) -> None:
+        """Drop the ``joint_states`` and ``tool_pose`` subscriptions: two reliable 1 kHz readers
+        that cost robot_state (and this process) CPU while a measurement runs."""
+        if self._watching:
+            for subscription in self._state_subscriptions:
+                self.node.destroy_subscription(subscription)
+            self._state_subscriptions = []
+            self._watching = False
 
     # --- plumbing --------------------------------------------------------------------------------
 
