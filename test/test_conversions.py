@@ -200,25 +200,39 @@ def test_joint_state_decoder_fast_path_and_fallbacks():
 
 def test_joint_state_decoder_matches_rclpy_on_a_random_stream():
     """One decoder fed a seeded stream of layouts (the fast path learns one, others fall back):
-    every answer equals rclpy's own deserialization matched by name."""
+    every answer (positions, velocities, stamp) equals rclpy's own deserialization matched by name."""
 
     seed = 20261127
     rng = np.random.default_rng(seed)
     names = ["joint1", "j2", "joint_three", "a_long_joint_name_4"]
     decoder = conv.JointStateDecoder(names)
     fast_layout = conv.make_joint_state(names, [0.0] * 4, [0.0] * 4)
-    for index in range(300):
+    for index in range(400):
         if rng.random() < 0.6:  # same layout as the learned one: new values only
-            message = conv.make_joint_state(names, rng.normal(size=4) * 3, rng.normal(size=4))
+            velocity_count = 4 if rng.random() < 0.8 else int(rng.choice([0, 3]))
+            message = conv.make_joint_state(names, rng.normal(size=4) * 3)
+            message.velocity = rng.normal(size=velocity_count).tolist()
         else:
             order = list(rng.permutation(names)) + (["extra"] if rng.random() < 0.5 else [])
             message = conv.make_joint_state(order, rng.normal(size=len(order)) * 3)
+            if rng.random() < 0.5:
+                message.velocity = rng.normal(size=len(order)).tolist()
             message.header.frame_id = "base_link" if rng.random() < 0.5 else ""
-            message.header.stamp.sec = int(rng.integers(0, 2**31 - 1))
+        if rng.random() < 0.5:
+            message.effort = rng.normal(size=int(rng.integers(0, 6))).tolist()
+        message.header.stamp.sec = int(rng.integers(0, 2**31 - 1))
+        message.header.stamp.nanosec = int(rng.integers(0, 1_000_000_000))
         data = serialize_message(message)
         decoded = deserialize_message(data, JointState)
-        expected = [decoded.position[list(decoded.name).index(name)] for name in names]
-        np.testing.assert_array_equal(decoder.positions(data), expected, err_msg=f"seed {seed}, message {index}")
+        order = [list(decoded.name).index(name) for name in names]
+        context = f"seed {seed}, message {index}"
+        sample = decoder.sample(data)
+        np.testing.assert_array_equal(sample.positions, [decoded.position[i] for i in order], err_msg=context)
+        if len(decoded.velocity) == len(decoded.name):
+            np.testing.assert_array_equal(sample.velocities, [decoded.velocity[i] for i in order], err_msg=context)
+        else:
+            assert sample.velocities is None, context
+        assert sample.stamp_ns == decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec, context
     np.testing.assert_array_equal(decoder.positions(serialize_message(fast_layout)), [0.0] * 4)
 
 

@@ -33,6 +33,7 @@ from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.robot_state import JointIntegrator
 from manip_kin.robots import load_robot
+from manip_kin.state_prediction import MAX_STATE_AGE_PERIODS, PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, make_time_scaling
 
 MODEL = load_robot("genova7")  # 7 joints, one prismatic: both joint kinds
@@ -255,6 +256,26 @@ def test_line_plan(pose, raw_matrix):
             continue
         assert math.isfinite(line.duration)
         assert _finite(line.sample(line.duration / 2)[0], *line.sample(line.duration / 2)[1])
+
+
+@SETTINGS
+@given(
+    st.lists(number, min_size=7, max_size=7), number, st.floats(0.0, 1.0), st.lists(plausible, min_size=7, max_size=7)
+)
+def test_state_prediction_from_hostile_velocities_and_stamps(velocities, age, latency, q_offsets):
+    """A joint state's velocities and stamp only move the state the law sees within the limits,
+    by at most a plausible rate over the largest horizon; the law's output stays bounded."""
+    q = np.clip(Q0 + 0.1 * np.array(q_offsets), MODEL.lower, MODEL.upper)
+    qdot = np.array(velocities)
+    period = 0.002
+    plausible_rates = PLAUSIBLE_RATE_FACTOR * MODEL.velocity_limits
+    predicted = state_for_command(q, qdot, age, period, latency, MODEL.lower, MODEL.upper, plausible_rates)
+    assert predicted.shape == q.shape and _finite(predicted)
+    assert np.all(predicted >= MODEL.lower) and np.all(predicted <= MODEL.upper)
+    # The longest horizon: the oldest accepted state plus the command latency, then half a period.
+    horizon = (MAX_STATE_AGE_PERIODS + 1) * period + latency + period
+    assert np.all(np.abs(predicted - q) <= plausible_rates * horizon + 1e-12)
+    _assert_control_output_ok(CONTROLLER.step(predicted, TOOL0, None, period))
 
 
 @SETTINGS

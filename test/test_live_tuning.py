@@ -144,14 +144,12 @@ def test_generator_limits_set_at_run_time_time_the_next_line(harness):
     target[:3, 3] += [0.0, 0.12, -0.05]  # 0.13 m, no rotation
     node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=RATE, time_scaling="constant")
     harness.executor.add_node(node)
-    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+    for topic, msg_type in (("/line_target", PoseStamped), ("/joint_states", JointState)):
         harness.wait_matched(topic, msg_type)
 
     def stream():
-        harness.publish(
-            "/tool_pose", conv.make_pose_stamped(start, "base_link", harness.node.get_clock().now().to_msg())
-        )
-        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0))
+        now = harness.node.get_clock().now().to_msg()
+        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0, stamp=now))
 
     params = Parameters(harness, "trajectory_generator")
     durations = []

@@ -268,6 +268,54 @@ def test_velocity_and_position_limit_switches(harness):
     np.testing.assert_allclose(commands[-1].data, raw, rtol=1e-6, atol=1e-6)
 
 
+def test_predict_state_and_command_latency_parameters(harness):
+    """The law runs on the reported state moved on by its velocities to the middle of the robot
+    period the command will drive (robot cycles on the grid of the state stamps). Simulated time
+    (/clock from here) fixes each state's age exactly."""
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    period = 1.0 / RATE
+    qdot = np.array([0.3, -0.2, 0.25, -0.3, 0.2, 0.01, -0.4])  # within every velocity limit
+    now_ns = 1_000 * 1_000_000_000
+    state_age = [0.0]
+
+    def stream():
+        harness.publish("/clock", Clock(clock=conv.ns_to_stamp(now_ns)))
+        stamp = conv.ns_to_stamp(now_ns - int(round(state_age[0] * 1e9)))
+        harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, Q0, qdot, stamp))
+
+    def expected(age: float, latency: float):
+        # The robot holds the command `latency` from now; it drives the period that ends at the
+        # first grid point (stamp + k periods, k >= 1) from then, and the law sees that
+        # period's middle.
+        k = 1
+        while k * period < age + latency - 1e-12:
+            k += 1
+        return _expected(GOAL, q=Q0 + qdot * (k * period - period / 2))
+
+    node, commands, _ = _start(harness, command_latency=0.0, use_sim_time=True)
+    harness.executor.add_node(node)  # its clock subscription runs in the executor
+    harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
+    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    # (state age [s], command_latency [s], predict_state): each row changes one thing.
+    cases = [(0.0, 0.0, True), (0.0, 1.25 * period, True), (2.5 * period, 1.25 * period, True), (0.0, 0.0, False)]
+    results = []
+    for age, latency, predict in cases:
+        state_age[0] = age
+        node.set_parameters([Parameter("command_latency", value=latency), Parameter("predict_state", value=predict)])
+        wanted = expected(age, latency) if predict else _expected(GOAL)
+        results.append(wanted)
+        assert harness.spin_until(
+            lambda wanted=wanted: commands and np.allclose(commands[-1].data, wanted, atol=1e-7),
+            5,
+            every=stream,
+            period=0.005,
+        ), (age, latency, predict, commands[-1].data if commands else None, wanted)
+    # The expectations differ from one another: each case tests something.
+    assert min(np.abs(a - b).max() for i, a in enumerate(results) for b in results[i + 1 :]) > 1e-5
+
+
 def test_goal_timeout_drops_an_old_goal(harness):
     node, commands, diagnostics = _start(harness, goal_timeout=0.3)
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731

@@ -1,4 +1,4 @@
-"""trajectory_generator alone: plans from the tool pose, streams the line, rejects bad targets."""
+"""trajectory_generator alone: plans from the joint states' tool pose, streams the line, rejects bad targets."""
 
 import math
 
@@ -14,7 +14,7 @@ from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.trajectory_generator import TrajectoryGeneratorNode
 from manip_kin.robots import load_robot
-from manip_kin.rotations import make_transform, rpy_to_matrix
+from manip_kin.rotations import make_transform
 from manip_kin.trajectory import distance_to_segment
 
 MODEL = load_robot("irb120")
@@ -36,7 +36,7 @@ def _start(harness, **params):
     paths = harness.collect(Path, "/planned_path", latched=True)
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
     node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=200.0, **params)
-    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+    for topic, msg_type in (("/line_target", PoseStamped), ("/joint_states", JointState)):
         harness.wait_matched(topic, msg_type)
     # And the other way: the node's streams reach this test's subscriptions from the first goal
     # on (a line started before they match would lose its first goals).
@@ -46,13 +46,11 @@ def _start(harness, **params):
     return node, goals, twists, paths, diagnostics
 
 
-def _state_stream(harness, pose=START, q=Q0):
+def _state_stream(harness, q=Q0):
     def stream():
-        # Stamped now: the generator judges the tool pose's age by its stamp.
-        harness.publish(
-            "/tool_pose", conv.make_pose_stamped(pose, "base_link", harness.node.get_clock().now().to_msg())
-        )
-        harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, q))
+        # Stamped now: the generator judges the joint state's age by its stamp.
+        now = harness.node.get_clock().now().to_msg()
+        harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, q, stamp=now))
 
     return stream
 
@@ -158,19 +156,38 @@ def test_rejects_bad_and_unreachable_targets(harness, capfd):
     assert harness.spin_until(lambda: node.state == "holding", 5, every=stream)
 
 
-def test_no_or_old_tool_pose_rejected(harness):
-    node, goals, _, _, _ = _start(harness, tool_pose_timeout=0.5)
+def test_no_old_or_bad_joint_state_rejected(harness):
+    node, goals, _, _, _ = _start(harness, joint_state_timeout=0.5)
     harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
     assert harness.spin_until(lambda: node.rejected_targets == 1, 3)
-    assert "no current /tool_pose" in node.last_rejection and not goals
-    # A tool pose stamped 2 s ago is too old to start a line from.
-    old = conv.ns_to_stamp(harness.node.get_clock().now().nanoseconds - 2_000_000_000)
-    harness.publish("/tool_pose", conv.make_pose_stamped(START, "base_link", old))
-    harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, Q0))
+    assert "no current /joint_states" in node.last_rejection and not goals
+    # A joint state stamped 0.7 s ago is too old to start a line from with a 0.5 s timeout...
+    old = conv.ns_to_stamp(harness.node.get_clock().now().nanoseconds - 700_000_000)
+    harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, Q0, stamp=old))
     harness.spin_for(0.1)
     harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
     assert harness.spin_until(lambda: node.rejected_targets == 2, 3)
-    assert "no current /tool_pose" in node.last_rejection and not goals
+    assert "no current /joint_states" in node.last_rejection and not goals
+    # ... and current with a 1 s timeout: the line starts.
+    from rclpy.parameter import Parameter
+
+    node.set_parameters([Parameter("joint_state_timeout", value=1.0)])
+    harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names, Q0, stamp=old))
+    harness.spin_for(0.1)
+    harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
+    assert harness.spin_until(lambda: node.state in ("streaming", "holding"), 3)
+    # A current state missing a joint: rejected with the joint named, nothing streamed anew.
+    assert harness.spin_until(lambda: node.state == "holding", 5)
+    harness.spin_for(0.1)  # the final goal arrives
+    count = len(goals)
+    now = harness.node.get_clock().now().to_msg()
+    harness.publish("/joint_states", conv.make_joint_state(MODEL.joint_names[:5], Q0[:5], stamp=now))
+    harness.spin_for(0.1)
+    harness.publish("/line_target", conv.make_pose_stamped(START, "base_link"))
+    assert harness.spin_until(lambda: node.rejected_targets == 3, 3)
+    assert "lacks joints" in node.last_rejection and MODEL.joint_names[5] in node.last_rejection
+    harness.spin_for(0.1)
+    assert node.state == "rejected" and len(goals) == count
 
 
 def test_new_target_preempts_from_current_pose(harness):
@@ -179,10 +196,11 @@ def test_new_target_preempts_from_current_pose(harness):
     harness.spin_for(0.1, every=stream)
     harness.publish("/line_target", conv.make_pose_stamped(TARGET, "base_link"))
     assert harness.spin_until(lambda: node.state == "streaming" and len(goals) > 20, 3, every=stream)
-    # The arm is now elsewhere: the new line starts from the tool pose it reports.
-    moved = make_transform(rpy_to_matrix(0.0, 0.1, 0.0), [0.38, 0.02, 0.62])
+    # The arm is now elsewhere: the new line starts from the tool pose of its joint state.
+    q_moved = np.array([0.05, 0.1, -0.05, 0.1, -0.1, 0.2])
+    moved = frame_pose(MODEL, q_moved)
     second = make_transform(np.eye(3), [0.40, -0.05, 0.60])
-    stream = _state_stream(harness, moved)
+    stream = _state_stream(harness, q_moved)
     harness.spin_for(0.1, every=stream)
     harness.publish("/line_target", conv.make_pose_stamped(second, "base_link"))
     assert harness.spin_until(lambda: len(paths) >= 2, 3, every=stream)

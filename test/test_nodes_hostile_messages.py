@@ -44,17 +44,15 @@ def _pose(xyz, quaternion=(0.0, 0.0, 0.0, 1.0)) -> PoseStamped:
 def test_generator_survives_the_burst_and_follows_a_line_after(harness, capfd):
     model = load_robot("irb120")
     q0 = np.zeros(6)
-    start = frame_pose(model, q0)
     goals = harness.collect(PoseStamped, "/goal_pose")
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
     node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=200.0)
-    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+    for topic, msg_type in (("/line_target", PoseStamped), ("/joint_states", JointState)):
         harness.wait_matched(topic, msg_type)
 
     def stream():
         now = harness.node.get_clock().now().to_msg()
-        harness.publish("/tool_pose", conv.make_pose_stamped(start, "base_link", now))
-        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0))
+        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0, stamp=now))
 
     harness.spin_for(0.1, every=stream)
     burst = [

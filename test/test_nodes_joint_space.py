@@ -40,11 +40,10 @@ def _now(harness):
 
 
 def _state_stream(harness, q=Q0):
-    """joint_states and tool_pose of a scara resting at ``q``, stamped now."""
+    """joint_states of a scara resting at ``q``, stamped now."""
 
     def stream():
         harness.publish("joint_states", conv.make_joint_state(NAMES, q, stamp=_now(harness)))
-        harness.publish("tool_pose", conv.make_pose_stamped(frame_pose(SCARA, q), "base_link", _now(harness)))
 
     return stream
 
@@ -58,7 +57,6 @@ def _start_generator(harness, **params):
         ("joint_trajectory", JointTrajectory),
         ("line_target", PoseStamped),
         ("joint_states", JointState),
-        ("tool_pose", PoseStamped),
     ):
         harness.wait_matched(topic, msg_type)
     return node, references, goals, diagnostics

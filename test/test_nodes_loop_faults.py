@@ -129,19 +129,17 @@ def test_robot_state_step_raising_holds_position(harness):
 def test_generator_raising_stops_streaming_and_holds_last_goal(harness):
     model = load_robot("irb120")
     q0 = np.zeros(6)
-    start = frame_pose(model, q0)
     target = make_transform(np.eye(3), [0.374, 0.25, 0.45])
     goals = harness.collect(PoseStamped, "/goal_pose")
     twists = harness.collect(TwistStamped, "/goal_twist")
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
     node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=200.0, max_linear_velocity=0.05)
-    for topic, msg_type in (("/line_target", PoseStamped), ("/tool_pose", PoseStamped), ("/joint_states", JointState)):
+    for topic, msg_type in (("/line_target", PoseStamped), ("/joint_states", JointState)):
         harness.wait_matched(topic, msg_type)
 
     def stream():
         now = harness.node.get_clock().now().to_msg()
-        harness.publish("/tool_pose", conv.make_pose_stamped(start, "base_link", now))
-        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0))
+        harness.publish("/joint_states", conv.make_joint_state(model.joint_names, q0, stamp=now))
 
     harness.spin_for(0.1, every=stream)
     harness.publish("/line_target", conv.make_pose_stamped(target, "base_link"))

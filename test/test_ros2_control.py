@@ -1,11 +1,16 @@
-"""cartesian_controller dropped into a ros2_control-style system with one remap.
+"""cartesian_controller and trajectory_generator dropped into a ros2_control-style system with one remap.
 
 The fake hardware (test/fake_hardware.py) stands for robot_state_publisher + ros2_control: a
 UR5 URDF from example-robot-data on ``robot_description``, ``joint_states`` with an extra
-gripper joint in its own order, and a JointGroupVelocityController's
-``/forward_velocity_controller/commands``. The controller gets no ``robot`` parameter: it
-waits for the URDF, takes the arm chain from it, and drives the hardware to a goal pose.
+gripper joint in its own order (no ``tool_pose``: there is no robot_state), and a
+JointGroupVelocityController's ``/forward_velocity_controller/commands``. The nodes get no
+``robot`` parameter: they wait for the URDF and take the arm chain from it; the controller
+drives the hardware to a goal pose, then the generator runs a line from where the hardware
+says the arm is.
 """
+
+import re
+import threading
 
 import numpy as np
 import pytest
@@ -14,6 +19,7 @@ from robot_data_files import UR5, example_robot_data_urdf
 
 from manip_kin.kinematics import frame_pose
 from manip_kin.pipeline import NodeProcess, Pipeline
+from manip_kin.trajectory import distance_to_segment
 from manip_kin.urdf import load_urdf_string
 
 Q0 = [0.3, -1.2, 1.5, -0.9, 1.3, 0.2]
@@ -33,7 +39,13 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         remaps={"joint_velocity_commands": COMMAND_TOPIC},
         ready_status="cartesian_controller",
     )
-    pipeline = Pipeline([controller], log_dir=tmp_path)
+    generator = NodeProcess(
+        "trajectory_generator",
+        "trajectory_generator",
+        {"rate_hz": 200.0, "time_scaling": "constant", "max_linear_velocity": 0.05},
+        ready_status="trajectory_generator",
+    )
+    pipeline = Pipeline([controller, generator], log_dir=tmp_path)
     hardware = None
     try:
         # The controller starts first: it must wait for the description, and say so.
@@ -60,8 +72,45 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         # The gripper joint in joint_states did not disturb it, and was never commanded.
         assert hardware.gripper == 0.02
         assert status.values["rejected_joint_states"] == "0"
+
+        # A line from where the hardware's joint states put the tool: 4 cm along x and down.
+        pipeline.start_process("trajectory_generator")
+        pipeline.wait_ready(["trajectory_generator"], timeout=30)
+        start = frame_pose(model, hardware.positions())
+        target = start.copy()
+        target[:3, 3] += [0.04, 0.0, -0.02]
+        # The tool's path, sampled from the hardware while the line runs.
+        path, line_done = [], threading.Event()
+
+        def sample_path():
+            while not line_done.wait(0.005):
+                path.append(frame_pose(model, hardware.positions())[:3, 3])
+
+        sampler = threading.Thread(target=sample_path)
+        sampler.start()
+        try:
+            done = client.wait_line_done(client.send_line(target, frame_id=model.base_frame), 60)
+        finally:
+            line_done.set()
+            sampler.join()
+        assert done.message == "holding", (done.message, pipeline.log_tail("trajectory_generator"))
+        converged, status = client.wait_converged(done.values["final_goal_stamp"], timeout=60)
+        assert converged, (status, pipeline.log_tail("cartesian_controller"))
+        # The arm settles on the target (the controller holds it): convergence is judged on a
+        # joint state that can be a few ms old, and the hardware runs in this busy process.
+        settled = lambda: np.abs(frame_pose(model, hardware.positions())[:3, 3] - target[:3, 3]).max() < 2e-4  # noqa: E731
+        assert client.spin_until(settled, 10), frame_pose(model, hardware.positions())[:3, 3] - target[:3, 3]
+        # The planned line started at the tool pose of the joint states (the arm was at rest).
+        log = pipeline.log_text("trajectory_generator")
+        match = re.search(r"streaming a constant line from \[([^\]]*)\] to", log)
+        assert match, log[-500:]
+        np.testing.assert_allclose([float(v) for v in match.group(1).split(",")], start[:3, 3], atol=2e-4)
+        # It ran along the line: 1 mm is 50x what the delay of a 200 Hz loop explains (an offline
+        # estimate; the hardware runs in this busy process), and far below a line planned from a
+        # wrong start (a jump of centimetres).
+        assert len(path) > 50 and distance_to_segment(np.array(path), start[:3, 3], target[:3, 3]).max() < 1e-3
     finally:
         codes = pipeline.stop()
         if hardware is not None:
             hardware.close()
-    assert codes == {"cartesian_controller": 0}
+    assert codes == {"cartesian_controller": 0, "trajectory_generator": 0}

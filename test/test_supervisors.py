@@ -244,7 +244,7 @@ class _Motion:
 def test_generator_rejects_when_idle_and_keeps_a_running_motion():
     supervisor = GeneratorSupervisor(200 * MS)
     assert supervisor.time_into_motion(0) is None
-    assert supervisor.reject("no current /tool_pose", "1.000000000") == "nothing to do"
+    assert supervisor.reject("no current /joint_states", "1.000000000") == "nothing to do"
     assert supervisor.state is GeneratorState.REJECTED and supervisor.level == "warn"
     assert not supervisor.start(_Motion(2.0), "line", 1000 * MS, "2.000000000", "a line")
     assert supervisor.state is GeneratorState.STREAMING and supervisor.target_stamp == "2.000000000"

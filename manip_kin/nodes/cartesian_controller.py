@@ -14,6 +14,7 @@ at ``diagnostics_rate_hz`` and at once when the state changes.
 from __future__ import annotations
 
 import sys
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -34,6 +35,7 @@ from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, Throttled
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
+from manip_kin.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
 
 
@@ -73,6 +75,11 @@ class CartesianControllerNode(LoopingNode):
         )
 
         self.q: np.ndarray | None = None
+        self._state_velocities: np.ndarray | None = None
+        self._state_stamp_ns = 0
+        self._plausible_rates = PLAUSIBLE_RATE_FACTOR * self.model.velocity_limits
+        # Joint-state stamps are on the ROS clock: the wall clock unless use_sim_time.
+        self._wall_clock = not self.get_parameter("use_sim_time").value
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
@@ -135,6 +142,8 @@ class CartesianControllerNode(LoopingNode):
         self.orientation_tolerance = params["orientation_tolerance"]
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self.gain_joint = params["gain_joint"]
+        self.predict_state = params["predict_state"]
+        self.command_latency = params["command_latency"]
         self.joint_tolerance = params["joint_tolerance"]
         self._diagnostics_period_ns = diagnostics_period_ns
 
@@ -166,7 +175,8 @@ class CartesianControllerNode(LoopingNode):
         # Joint states arrive every cycle: decoded from their bytes (see JointStateDecoder).
         while (data := self._joint_state_sub.take(raw=True)) is not None:
             try:
-                self.q = self._joint_states.positions(data)
+                sample = self._joint_states.sample(data)
+                self.q, self._state_velocities, self._state_stamp_ns = sample
                 self.supervisor.joint_state_received(now_ns)
             except conv.InvalidMessageError as error:
                 self.rejected_joint_states += 1
@@ -230,17 +240,35 @@ class CartesianControllerNode(LoopingNode):
         """After a failed cycle: zero joint rates."""
         self._command_pub.publish(self._command_cdr.encode(self._zeros))
 
+    def law_positions(self) -> np.ndarray:
+        """The joint positions the law runs on: the reported ones, or with ``predict_state``
+        those predicted for the period the next command drives (:mod:`manip_kin.state_prediction`)."""
+        if not self.predict_state:
+            return self.q
+        now_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        return state_for_command(
+            self.q,
+            self._state_velocities,
+            (now_ns - self._state_stamp_ns) * 1e-9,
+            self.dt,
+            self.command_latency,
+            self.model.lower,
+            self.model.upper,
+            self._plausible_rates,
+        )
+
     def _cycle(self, now_ns: int) -> None:
         self._take_inputs(now_ns)
         supervisor = self.supervisor
         qdot = self._zeros
         if supervisor.gate(now_ns):
             try:
+                q = self.law_positions()
                 if supervisor.goal_kind is GoalKind.JOINT:
-                    qdot = self._joint_step(now_ns)
+                    qdot = self._joint_step(now_ns, q)
                 else:
                     twist_fresh = supervisor.feed_forward_fresh(now_ns)
-                    output = self.controller.step(self.q, self.goal, self._twist if twist_fresh else None, self.dt)
+                    output = self.controller.step(q, self.goal, self._twist if twist_fresh else None, self.dt)
                     self.output = output
                     qdot = output.qdot
                     supervisor.pose_step_done(output, twist_fresh)
@@ -256,14 +284,14 @@ class CartesianControllerNode(LoopingNode):
         if supervisor.report_due(now_ns):
             self._publish_diagnostics(now_ns)
 
-    def _joint_step(self, now_ns: int) -> np.ndarray:
-        """One step of the joint tracking law; the reference velocity is used while it is fresh
-        (as the goal twist: a stalled stream must not carry the arm on)."""
+    def _joint_step(self, now_ns: int, q: np.ndarray) -> np.ndarray:
+        """One step of the joint tracking law from ``q``; the reference velocity is used while it
+        is fresh (as the goal twist: a stalled stream must not carry the arm on)."""
         q_reference, qdot_reference = self.reference
         fresh = self.supervisor.goal_fresh(now_ns)
         output = joint_tracking_step(
             self.model,
-            self.q,
+            q,
             q_reference,
             qdot_reference if fresh else None,
             self.gain_joint,

@@ -74,6 +74,24 @@ PARAMETERS = (
         tunable=True,
     ),
     ParamSpec(
+        "predict_state",
+        "bool",
+        True,
+        "run the law on the joint state predicted (from its velocities and stamp) for the period the "
+        "command will drive, compensating the state-command-robot delay",
+        tunable=True,
+    ),
+    ParamSpec(
+        "command_latency",
+        "float",
+        0.0003,
+        "for predict_state: time from publishing a command until the robot holds it "
+        "(add one robot period for a robot that stamps its state before applying that cycle's command)",
+        "s",
+        minimum=0.0,
+        tunable=True,
+    ),
+    ParamSpec(
         "position_tolerance",
         "float",
         1e-4,

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from std_msgs.msg import Float64MultiArray
@@ -203,17 +204,35 @@ def _align(offset: int, size: int) -> int:
     return offset + (-offset) % size
 
 
+class JointStateSample(NamedTuple):
+    """One decoded joint state, in model order.
+
+    Attributes:
+        positions: [rad | m], shape (n,), checked (finite, within the accepted ranges).
+        velocities: [rad/s | m/s], shape (n,), or None when the message has none for every
+            joint (velocities are not checked here: see their use).
+        stamp_ns: the header stamp [ns].
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray | None
+    stamp_ns: int
+
+
 class JointStateDecoder:
-    """Model-order positions from serialised ``JointState`` bytes (``take_message(raw=True)``).
+    """Model-order positions (and velocities, stamp) from serialised ``JointState`` bytes
+    (``take_message(raw=True)``).
 
     Building the Python message costs ~30 µs per ``JointState``; a driver sends the same
     names in the same order every time, so after the first message the decoder checks
     that the header's frame id and the names are byte-identical to the learned ones and
-    reads the positions straight from the buffer. Anything else (other names or order,
-    other frame id) goes through ``deserialize_message`` and :class:`JointStateMapper`.
+    reads the positions and velocities straight from the buffer. Anything else (other
+    names or order, other frame id) goes through ``deserialize_message`` and
+    :class:`JointStateMapper`.
 
     Args:
         joint_names: the model's joint names in model order.
+        lower, upper: accepted position range per joint (see :class:`JointStateMapper`).
     """
 
     def __init__(self, joint_names: Sequence[str], lower=None, upper=None):
@@ -225,20 +244,33 @@ class JointStateDecoder:
         self._blob: bytes | None = None
         self._count_at = 0
         self._values_at = 0
+        self._velocity_count_at = 0
+        self._velocity_values_at = 0
 
     def positions(self, data: bytes) -> np.ndarray:
         """Positions in model order, shape (n,); :class:`InvalidMessageError` as :class:`JointStateMapper`."""
+        return self.sample(data).positions
+
+    def sample(self, data: bytes) -> JointStateSample:
+        """Positions, velocities and stamp; :class:`InvalidMessageError` as :class:`JointStateMapper`."""
         blob = self._blob
         if blob is not None and data[12 : 12 + len(blob)] == blob and len(data) >= self._count_at + 4:
-            (count,) = struct.unpack_from("<I", data, self._count_at)
-            if count == self._count and len(data) >= self._values_at + 8 * count:
-                values = np.frombuffer(data, dtype="<f8", count=count, offset=self._values_at).copy()
-                return self._mapper.check_positions(values)
+            count = struct.unpack_from("<I", data, self._count_at)[0]
+            if count == self._count and len(data) >= self._velocity_count_at + 4:
+                positions = np.frombuffer(data, dtype="<f8", count=count, offset=self._values_at).copy()
+                velocities = None
+                if struct.unpack_from("<I", data, self._velocity_count_at)[0] == count and len(data) >= (
+                    self._velocity_values_at + 8 * count
+                ):
+                    velocities = np.frombuffer(data, dtype="<f8", count=count, offset=self._velocity_values_at).copy()
+                sec, nanosec = struct.unpack_from("<iI", data, 4)
+                return JointStateSample(self._mapper.check_positions(positions), velocities, sec * _NS_PER_S + nanosec)
         msg = _deserialize(data, self._msg_type, "joint state")
-        values = self._mapper.positions(msg)
+        positions = self._mapper.positions(msg)
+        velocities = self._mapper.velocities(msg)
         if list(msg.name) == self._mapper.joint_names and len(msg.position) == self._count:
             self._learn(data)
-        return values
+        return JointStateSample(positions, velocities, msg.header.stamp.sec * _NS_PER_S + msg.header.stamp.nanosec)
 
     def _learn(self, data: bytes) -> None:
         # Payload offsets (after the 4-byte encapsulation): stamp 0..8, frame_id at 8.
@@ -252,8 +284,12 @@ class JointStateDecoder:
             offset += 4 + length
         self._blob = bytes(data[12 : 4 + offset])
         count_offset = _align(offset, 4)
+        values_offset = _align(count_offset + 4, 8)
+        velocity_count_offset = values_offset + 8 * self._count  # 8-aligned, so 4-aligned
         self._count_at = 4 + count_offset
-        self._values_at = 4 + _align(count_offset + 4, 8)
+        self._values_at = 4 + values_offset
+        self._velocity_count_at = 4 + velocity_count_offset
+        self._velocity_values_at = 4 + _align(velocity_count_offset + 4, 8)
 
 
 def decode_float64_array(data: bytes) -> np.ndarray:

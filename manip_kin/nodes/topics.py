@@ -37,7 +37,7 @@ def latest_state_qos(depth: int):
 
     Best effort, volatile, keep last ``depth`` (like rclpy's ``qos_profile_sensor_data``):
     the controller's ``joint_states``, robot_state's ``joint_velocity_commands``, the
-    generator's ``joint_states`` and ``tool_pose``, robot_state's ``goal_pose`` for its
+    generator's ``joint_states``, robot_state's ``goal_pose`` for its
     markers. A sample resent after a loss would be older than the next one, which comes a
     cycle later anyway; and a reliable reader costs its writer a heartbeat-timer restart
     and a wake-up of the middleware's event thread on every sample (measured at 1 kHz:

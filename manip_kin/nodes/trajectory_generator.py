@@ -1,8 +1,9 @@
 """``trajectory_generator``: streams a straight line to a pose target, or a joint-space trajectory.
 
 On each valid ``line_target`` the node plans a :class:`~manip_kin.trajectory.LineTrajectory`
-from the newest ``tool_pose``, checks the arm can follow it
-(:func:`~manip_kin.trajectory.check_line_reachable` from the newest ``joint_states``),
+from the tool pose of the newest ``joint_states`` (its own FK: any driver's joint states
+will do, no robot_state needed), checks the arm can follow it from that configuration
+(:func:`~manip_kin.trajectory.check_line_reachable`),
 publishes it on ``planned_path`` and then, every cycle of its
 :class:`~manip_kin.nodes.rate_loop.RateLoop`, publishes the sampled ``goal_pose`` and
 ``goal_twist`` until the end. At the end it publishes the final pose once with a zero
@@ -67,8 +68,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
-        # not turning 2 kHz of state messages into Python objects keeps this loop cheap.
-        self._tool_pose_sub = PolledSubscription(self, PoseStamped, "tool_pose", latest_state_qos(1))
+        # not turning 1 kHz of state messages into Python objects keeps this loop cheap.
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", latest_state_qos(1))
         self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", STREAM_DEPTH)
         self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", STREAM_DEPTH)
@@ -88,8 +88,9 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._reference_cdr = conv.JointStateCdr(self.model.joint_names)
 
         self._start_stamp_ns = 0
-        self._tool_pose_msg: PoseStamped | None = None
         self._joint_state_msg: JointState | None = None
+        # Lines are planned for the frame robot_state calls the tool (the end effector without one).
+        self._start_frame = self.model.frame_index(self.model.default_frame)
         self._warn = ThrottledLog(self.get_logger().warning, 0.5)
         self._error = ThrottledLog(self.get_logger().error, 0.5)
 
@@ -136,7 +137,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.joint_time_scaling = params["joint_time_scaling"]
         self.task = task
         self.check_reach = params["check_reach"]
-        self._tool_pose_timeout_ns = int(params["tool_pose_timeout"] * 1e9)
+        self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._path_points = max(2, params["path_points"])
         self.supervisor.throttle.period_ns = int(1e9 / params["diagnostics_rate_hz"])
@@ -185,30 +186,32 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"rejected {topic.subscription.topic_name}: {reason}; {kept}",
         )
 
-    def _current_state(self, msg: PoseStamped | JointTrajectory) -> bool:
-        """Take the newest tool pose and joint state; False (and ``msg`` rejected) when the one
-        a plan starts from is missing or older than ``tool_pose_timeout``."""
-        while (state := self._tool_pose_sub.take()) is not None:
-            self._tool_pose_msg = state
+    def _current_positions(self, msg: PoseStamped | JointTrajectory) -> np.ndarray | None:
+        """The newest joint positions (model order); None (and ``msg`` rejected) when there is no
+        usable joint state younger than ``joint_state_timeout``."""
         while (state := self._joint_state_sub.take()) is not None:
             self._joint_state_msg = state
-        start = self._joint_state_msg if isinstance(msg, JointTrajectory) else self._tool_pose_msg
-        if start is None or (
-            self.get_clock().now().nanoseconds - conv.stamp_to_ns(start.header.stamp) > self._tool_pose_timeout_ns
+        state = self._joint_state_msg
+        topic = self._joint_state_sub.subscription.topic_name
+        if state is None or (
+            self.get_clock().now().nanoseconds - conv.stamp_to_ns(state.header.stamp) > self._joint_state_timeout_ns
         ):
-            subscription = self._joint_state_sub if isinstance(msg, JointTrajectory) else self._tool_pose_sub
-            self._reject(msg, f"no current {subscription.subscription.topic_name} (is robot_state running?)")
-            return False
-        return True
+            self._reject(msg, f"no current {topic} (is robot_state or the robot's driver running?)")
+            return None
+        try:
+            return self._mapper.positions(state)
+        except conv.InvalidMessageError as error:
+            self._reject(msg, f"cannot start from the current {topic}: {error}")
+            return None
 
     # --- planning ----------------------------------------------------------------------------------
 
     def _plan_trajectory(self, msg: JointTrajectory) -> int | None:
         """Plan a joint trajectory from the current joint state; its start time [ns] when it started."""
-        if not self._current_state(msg):
+        q = self._current_positions(msg)
+        if q is None:
             return None
         try:
-            q = self._mapper.positions(self._joint_state_msg)
             names, points = trajectory_points(msg)
             plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling)
         except ManipKinError as error:
@@ -231,32 +234,16 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
         """Plan a line to ``target_msg``; True when it replaced the running line."""
-        if not self._current_state(target_msg):
+        q = self._current_positions(target_msg)
+        if q is None:
             return False
-        tool_problem = conv.pose_problem(
-            self._tool_pose_msg,
-            self.base_frame,
-            "tool pose",
-            self._quaternion_tolerance,
-            self.bounds.max_target_distance,
-        )
-        if tool_problem is not None:
-            self._reject(target_msg, f"cannot start from the current tool pose: {tool_problem}")
-            return False
-        start = conv.pose_stamped_to_matrix(self._tool_pose_msg)
+        start = frame_pose(self.model, q, self._start_frame)
         goal = conv.pose_stamped_to_matrix(target_msg)
         if not self.task.orientation_rows:
             goal[:3, :3] = start[:3, :3]  # orientation free: keep it, and do not time the line by a turn
         try:
             line = LineTrajectory.plan(start, goal, self.time_scaling, self.limits)
             if self.check_reach:
-                if self._joint_state_msg is None:
-                    self._reject(
-                        target_msg,
-                        f"no {self._joint_state_sub.subscription.topic_name} received yet for the reach check",
-                    )
-                    return False
-                q = self._mapper.positions(self._joint_state_msg)
                 report = check_line_reachable(self.model, line, q, task=self.task)
                 if not report.reachable:
                     self._reject(target_msg, report.reason, "unreachable")

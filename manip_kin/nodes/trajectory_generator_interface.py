@@ -78,10 +78,10 @@ PARAMETERS = (
         "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
     ),
     ParamSpec(
-        "tool_pose_timeout",
+        "joint_state_timeout",
         "float",
         0.5,
-        "a target is rejected when tool_pose (a trajectory: joint_states) is older than this",
+        "a target is rejected when the newest joint_states is older than this (by its stamp)",
         "s",
         positive=True,
         tunable=True,
@@ -109,10 +109,11 @@ PARAMETERS = (
 
 USAGE = usage_text(
     NODE_NAME,
-    "Straight-line goals: on a line_target pose, plans a line from the current tool_pose\n"
-    "(position along the segment, orientation by slerp) timed by time_scaling within the\n"
-    "velocity and acceleration limits, checks the arm can follow it from the current\n"
-    "joint_states, and streams goal_pose and goal_twist at rate_hz until the end, then\n"
+    "Straight-line goals: on a line_target pose, plans a line from the current tool pose (FK\n"
+    "of the newest joint_states; the end effector if the robot has no tool; position along\n"
+    "the segment, orientation by slerp) timed by time_scaling within the velocity and\n"
+    "acceleration limits, checks the arm can follow it from that configuration, and\n"
+    "streams goal_pose and goal_twist at rate_hz until the end, then\n"
     "publishes the final pose once and holds. A joint_trajectory (as ros2_control's\n"
     "JointTrajectoryController takes it) is interpolated with joint_time_scaling from the\n"
     "current joint_states and streamed as joint_reference. The latest goal of either kind\n"
@@ -121,8 +122,7 @@ USAGE = usage_text(
     subscribes=[
         ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
         ("joint_trajectory", "trajectory_msgs/JointTrajectory", "joint names, points with time_from_start"),
-        ("tool_pose", "geometry_msgs/PoseStamped", "current tool pose (start of a line)"),
-        ("joint_states", "sensor_msgs/JointState", "current configuration (reach check)"),
+        ("joint_states", "sensor_msgs/JointState", "current configuration: start of a line or trajectory, reach check"),
     ],
     publishes=[
         ("goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),

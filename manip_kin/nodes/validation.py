@@ -37,8 +37,8 @@ class JointStateMapper:
 
     Args:
         joint_names: the model's joint names in model order.
-        lower: smallest accepted position per joint (model order), shape (n,); default -inf.
-        upper: largest accepted position per joint, shape (n,); default +inf.
+        lower: smallest accepted position per joint (model order), shape (n,); default: none.
+        upper: largest accepted position per joint, shape (n,); default: none.
     """
 
     def __init__(self, joint_names: Sequence[str], lower=None, upper=None):
@@ -47,8 +47,8 @@ class JointStateMapper:
         # Finite bounds (an infinite one becomes the largest float), so that the range check
         # alone refuses ±inf as well as NaN.
         largest = np.finfo(float).max
-        self.lower = np.maximum(np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float), -largest)
-        self.upper = np.minimum(np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float), largest)
+        self.lower = np.full(n, -largest) if lower is None else np.maximum(np.asarray(lower, dtype=float), -largest)
+        self.upper = np.full(n, largest) if upper is None else np.minimum(np.asarray(upper, dtype=float), largest)
         self._last_names: list[str] | None = None
         self._index: np.ndarray | None = None
         self._problem: str | None = None
@@ -75,6 +75,17 @@ class JointStateMapper:
                 f"joint state has {len(names)} names but {position.shape[0]} positions; valid: one position per name"
             )
         return self.check_positions(position[self._index])
+
+    def velocities(self, msg: JointState) -> np.ndarray | None:
+        """Velocities of ``msg`` in model order, shape (n,), or None unless it has one per name.
+
+        Call after :meth:`positions` accepted ``msg`` (it builds the joint order). The values
+        are not checked: whoever uses them decides what is plausible.
+        """
+        velocity = msg.velocity
+        if self._index is None or len(velocity) != len(msg.name):
+            return None
+        return np.asarray(velocity, dtype=float)[self._index]
 
     def check_positions(self, ordered: np.ndarray) -> np.ndarray:
         """``ordered`` (model order) if finite and within the accepted ranges, else :class:`InvalidMessageError`."""
