@@ -16,7 +16,9 @@ do that:
   Python executor wakes for every message).
 
 The recorder's :class:`RawSubscription` works the same two ways for its intake thread
-(serialized messages with their middleware info, and message-lost counts).
+(serialized messages with their middleware info, and message-lost counts). On the public
+path its last drain (the executor has stopped) also tries the internal take, guarded: the
+messages the middleware still holds then would otherwise be lost from the recording.
 
 The fast path is chosen when available; ``MANIP_KIN_PUBLIC_RCLPY=1`` forces the public
 one (tests run the nodes and the recorder that way).
@@ -273,13 +275,27 @@ class RawSubscription:
         with self._lock:
             self._lost_total += int(status.total_count_change)
 
-    def take(self) -> tuple[bytes, dict] | None:
-        """The oldest message not yet taken, ``(CDR bytes, message info)``, or None. Never blocks."""
+    def take(self, final: bool = False) -> tuple[bytes, dict] | None:
+        """The oldest message not yet taken, ``(CDR bytes, message info)``, or None. Never blocks.
+
+        ``final``: the executor has stopped (the recorder's last drain). On the public path the
+        messages the middleware still holds never reach the callback then; they are taken
+        from the subscription directly, where this rclpy offers that (best effort).
+        """
         if self._queue is not None:
             try:
                 return self._queue.popleft()
             except IndexError:
-                return None
+                return self._take_left_over() if final else None
+        return self._take_from_handle()
+
+    def _take_left_over(self) -> tuple[bytes, dict] | None:
+        try:
+            return self._take_from_handle()
+        except Exception:  # noqa: BLE001 - an rclpy without the internal take: nothing more to get
+            return None
+
+    def _take_from_handle(self) -> tuple[bytes, dict] | None:
         handle = self.subscription.handle
         try:
             with handle:

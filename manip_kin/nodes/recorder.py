@@ -281,13 +281,13 @@ class RecorderNode(Node):
         for entry in entries:
             entry.middleware_lost += entry.intake.take_lost()
 
-    def _drain(self) -> None:
-        """Take every queued message of every topic and write it."""
+    def _drain(self, final: bool = False) -> None:
+        """Take every queued message of every topic and write it (``final``: see ``RawSubscription.take``)."""
         with self._lock:
             entries = list(self._topics.values())
         for entry in entries:
             while True:
-                taken = entry.intake.take()
+                taken = entry.intake.take(final)
                 if taken is None:
                     break
                 data, info = taken
@@ -360,7 +360,7 @@ class RecorderNode(Node):
             return self._finished_line
         self._stopping.set()
         self._intake.join(timeout=5.0)
-        self._drain()  # messages that arrived before the signal are part of the run
+        self._drain(final=True)  # messages that arrived before the signal are part of the run
         self._take_lost_events()
         for entry in self._topics.values():
             entry.intake.destroy(self)

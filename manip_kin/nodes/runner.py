@@ -42,9 +42,13 @@ TEARDOWN_TIMEOUT_S = 3.0
 def _exit_if_teardown_hangs(exit_code: int, timeout_s: float = TEARDOWN_TIMEOUT_S) -> None:
     """Exit with ``exit_code`` if the process is still alive ``timeout_s`` from now.
 
-    A guard: the node's own work (a recorder closing its file) is done before this starts;
-    what is left is middleware teardown (node destruction, rclpy shutdown, interpreter exit),
-    and a hang there is not worth a process its supervisor has to SIGKILL.
+    The node's own work (a recorder closing its file) is done before this starts; what is
+    left is middleware teardown (node destruction, rclpy shutdown, interpreter exit), and a
+    hang there is not worth a process its supervisor has to SIGKILL. Seen under load:
+    ``destroy_node`` blocking inside rclpy's C++ with the GIL held, so no Python thread can
+    run. Hence three guards: at ``timeout_s`` faulthandler's own C thread writes every
+    thread's stack to stderr; a Python timer then warns and exits (when the GIL is free);
+    and a C timer (:func:`_exit_later_without_the_gil`) exits half a second later in any case.
     """
 
     def give_up() -> None:
@@ -57,18 +61,65 @@ def _exit_if_teardown_hangs(exit_code: int, timeout_s: float = TEARDOWN_TIMEOUT_
         finally:
             os._exit(exit_code)
 
-    timer = threading.Timer(timeout_s, give_up)
+    faulthandler.dump_traceback_later(timeout_s, repeat=False, file=sys.stderr, exit=False)
+    timer = threading.Timer(timeout_s + 0.05, give_up)
     timer.daemon = True
     timer.start()
+    _exit_later_without_the_gil(exit_code, timeout_s + 0.5)
+
+
+def _exit_later_without_the_gil(exit_code: int, delay_s: float) -> bool:
+    """Arm a POSIX timer whose expiry calls libc's ``_exit(exit_code)`` in a thread of its own
+    (``SIGEV_THREAD``): no Python, no GIL involved. False where that cannot be set up."""
+    import ctypes
+
+    class _Sigevent(ctypes.Structure):  # struct sigevent (Linux): sigval, signo, notify, then the thread's function
+        _fields_ = [
+            ("sigev_value", ctypes.c_void_p),
+            ("sigev_signo", ctypes.c_int),
+            ("sigev_notify", ctypes.c_int),
+            ("sigev_notify_function", ctypes.c_void_p),
+            ("sigev_notify_attributes", ctypes.c_void_p),
+            ("_pad", ctypes.c_int * 8),
+        ]
+
+    class _Timespec(ctypes.Structure):
+        _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+    class _Itimerspec(ctypes.Structure):
+        _fields_ = [("it_interval", _Timespec), ("it_value", _Timespec)]
+
+    sigev_thread, clock_monotonic = 2, 1  # <signal.h>, <time.h>
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        event = _Sigevent()
+        event.sigev_value = exit_code & 0xFF  # passed to _exit as its int argument
+        event.sigev_notify = sigev_thread
+        event.sigev_notify_function = ctypes.cast(libc._exit, ctypes.c_void_p).value
+        timer_id = ctypes.c_void_p()
+        if libc.timer_create(clock_monotonic, ctypes.byref(event), ctypes.byref(timer_id)) != 0:
+            return False
+        seconds = int(delay_s)
+        expiry = _Itimerspec(_Timespec(0, 0), _Timespec(seconds, int((delay_s - seconds) * 1e9)))
+        return libc.timer_settime(timer_id, 0, ctypes.byref(expiry), None) == 0
+    except (OSError, AttributeError, ValueError):
+        return False
 
 
 def _ignore_signals() -> None:
     """SIGINT and SIGTERM ignored from now on, at the Python level (the node is stopping)."""
     for signal_number in (signal.SIGINT, signal.SIGTERM):
-        try:
-            signal.signal(signal_number, signal.SIG_IGN)
-        except (ValueError, OSError):  # not the main thread (a test harness): nothing to do
-            pass
+        for _attempt in range(3):
+            try:
+                signal.signal(signal_number, signal.SIG_IGN)
+                break
+            except KeyboardInterrupt:
+                # signal.signal() first runs the handlers of signals already received: the
+                # SIGINT that stopped spin() can raise here (seen in a loaded test run). It
+                # asked for this cleanup: drop it and try again.
+                continue
+            except (ValueError, OSError):  # not the main thread (a test harness): nothing to do
+                break
 
 
 def run_node(
