@@ -169,6 +169,8 @@ def test_controller_killed_and_restarted_recovers(genova):
         np.testing.assert_array_equal(message.position, first)
         assert not any(message.velocity)
     genova.restart_process("cartesian_controller")
+    # Restarted after a SIGKILL on UDP only (Fast DDS's shared memory can leave it deaf: Pipeline).
+    assert "restarted after a SIGKILL: FASTDDS_BUILTIN_TRANSPORTS=UDPv4" in genova.log_text("cartesian_controller")
     assert client.wait_status("cartesian_controller").message in ("idle", "stale input")
     result = run_cli(
         genova,

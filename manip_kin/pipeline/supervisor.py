@@ -177,6 +177,10 @@ def pipeline_processes(
     ]
 
 
+#: Fast DDS's environment variable choosing its built-in transports (shared memory + UDP by default).
+FAST_DDS_TRANSPORTS = "FASTDDS_BUILTIN_TRANSPORTS"
+
+
 class Pipeline:
     """Node processes started together and stopped together.
 
@@ -211,6 +215,7 @@ class Pipeline:
         self.log_dir = Path(log_dir) if log_dir else Path(tempfile.mkdtemp(prefix="manip_kin_pipeline_"))
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self._popen: dict[str, subprocess.Popen] = {}
+        self._killed: set[str] = set()  # ended by SIGKILL: restarted on UDP only (start_process)
         self._logs: dict[str, object] = {}
         self._client: PipelineClient | None = None
 
@@ -234,12 +239,19 @@ class Pipeline:
         if old is not None and old.poll() is None:
             raise PipelineError(f"{name} is already running (pid {old.pid})")
         command = [find_executable(spec.executable, self.executable_dir)] + spec.arguments()
+        env = self.env
         log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed in stop
+        if name in self._killed and FAST_DDS_TRANSPORTS not in env:
+            # Fast DDS 2.14 (Jazzy): the shared-memory port a SIGKILLed process leaves behind can
+            # leave its successor matched but receiving nothing (eProsima/Fast-DDS#5053, #2811;
+            # seen once here: a restarted controller without joint states for 40 s). UDP does not.
+            env = {**env, FAST_DDS_TRANSPORTS: "UDPv4"}
+            log.write(f"# restarted after a SIGKILL: {FAST_DDS_TRANSPORTS}=UDPv4\n".encode())
         log.write(f"$ {' '.join(command)}\n".encode())
         log.flush()
         self._logs[name] = log
         self._popen[name] = subprocess.Popen(
-            command, env=self.env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+            command, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
         )
         return self._popen[name]
 
@@ -304,6 +316,8 @@ class Pipeline:
         log = self._logs.pop(name, None)
         if log is not None:
             log.close()
+        if popen.returncode == -signal.SIGKILL:
+            self._killed.add(name)
         return popen.returncode
 
     def kill_process(self, name: str) -> int | None:
