@@ -45,7 +45,8 @@ def test_goal_wait_reaches_genova7_pose_goal(genova):
     assert result.returncode == 0, result.stderr + result.stdout
     payload = json.loads(result.stdout)
     assert payload["converged"] is True and payload["state"] == "converged"
-    assert payload["final_error"]["position"] < 1e-4 and payload["final_error"]["orientation"] < 1e-3
+    # <= : converged means below the tolerances, printed to 5 significant digits (see below).
+    assert payload["final_error"]["position"] <= 1e-4 and payload["final_error"]["orientation"] <= 1e-3
     # How long it takes is the law's business, checked in simulated time (test_simulation: pure
     # exponential convergence, no stall at the prismatic limit); wall time here is the machine's.
     model = load_robot("genova7")
@@ -189,4 +190,6 @@ def test_controller_killed_and_restarted_recovers(genova):
         "--json",
     )
     assert result.returncode == 0, result.stderr + genova.log_tail("cartesian_controller")
-    assert json.loads(result.stdout)["final_error"]["position"] < 1e-4
+    # <= : the controller converges below position_tolerance (1e-4 m) and the CLI prints the
+    # error to 5 significant digits, so 9.99996e-05 reads 0.0001 (seen once).
+    assert json.loads(result.stdout)["final_error"]["position"] <= 1e-4
