@@ -14,7 +14,6 @@ at ``diagnostics_rate_hz`` and at once when the state changes.
 from __future__ import annotations
 
 import sys
-import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -78,8 +77,6 @@ class CartesianControllerNode(LoopingNode):
         self._state_velocities: np.ndarray | None = None
         self._state_stamp_ns = 0
         self._plausible_rates = PLAUSIBLE_RATE_FACTOR * self.model.velocity_limits
-        # Joint-state stamps are on the ROS clock: the wall clock unless use_sim_time.
-        self._wall_clock = not self.get_parameter("use_sim_time").value
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
@@ -245,7 +242,7 @@ class CartesianControllerNode(LoopingNode):
         those predicted for the period the next command drives (:mod:`manip_kin.state_prediction`)."""
         if not self.predict_state:
             return self.q
-        now_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        now_ns = self.ros_time_ns()
         return state_for_command(
             self.q,
             self._state_velocities,

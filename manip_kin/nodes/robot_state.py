@@ -259,7 +259,6 @@ class RobotStateNode(LoopingNode):
         self._pose_cdr = conv.PoseStampedCdr(self.base_frame)
         self._twist_cdr = conv.TwistStampedCdr(self.base_frame)
 
-        self._wall_clock = not self.get_parameter("use_sim_time").value
         self._command: np.ndarray | None = None
         self._command_time_ns = 0
         self._last_cycle_ns = 0
@@ -317,7 +316,7 @@ class RobotStateNode(LoopingNode):
         """After a failed cycle: hold position (drop the command; the state again, at zero velocity)."""
         self._command = None
         integrator = self.integrator
-        stamp_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        stamp_ns = self.ros_time_ns()
         self._joint_state_pub.publish(
             self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, [0.0] * self.model.dof)
         )
@@ -335,7 +334,7 @@ class RobotStateNode(LoopingNode):
         integrator.step(command, dt)
 
         # System time is ROS time unless use_sim_time (checked once at start).
-        stamp_ns = time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+        stamp_ns = self.ros_time_ns()
         self._joint_state_pub.publish(
             self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, integrator.qdot_values)
         )
