@@ -196,6 +196,70 @@ def test_a_node_dumps_its_stacks_on_sigusr1():
     assert stderr.count("most recent call first") >= 1 and "in run_node" in stderr, stderr
 
 
+CTRL_C_IN_A_CALLBACK = """
+import os, signal, sys, time
+from rclpy.node import Node
+from manip_kin.nodes.runner import run_node
+
+STUCK = sys.argv[1] == "stuck"
+
+class CtrlCInACallback(Node):
+    def __init__(self):
+        super().__init__("ctrl_c_in_a_callback")
+        self.timer = self.create_timer(0.01, self.work)
+
+    def work(self):
+        self.timer.cancel()
+        if STUCK:  # a callback that never returns
+            print("stuck", flush=True)
+            while True:
+                time.sleep(0.01)
+        os.kill(os.getpid(), signal.SIGINT)
+        # A piece of work the Ctrl-C lands in the middle of (the recorder's chunk write, say):
+        # wait until rclpy's handler has shut the context down, then finish the work.
+        deadline = time.monotonic() + 20
+        while self.context.ok() and time.monotonic() < deadline:
+            time.sleep(0.001)
+        steps = sum(range(100000))
+        print(f"finished {steps}", flush=True)
+
+sys.exit(run_node(CtrlCInACallback, "usage", ["ctrl_c_in_a_callback"]))
+"""
+
+
+def test_ctrl_c_stops_a_node_without_interrupting_the_callback_that_runs():
+    """A KeyboardInterrupt at an arbitrary bytecode once cost a recording a chunk of messages:
+    the first Ctrl-C only stops the node (rclpy shuts the context down), the callback finishes."""
+    result = subprocess.run(
+        [sys.executable, "-c", CTRL_C_IN_A_CALLBACK, "work"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == f"finished {sum(range(100000))}", result.stderr
+
+
+def test_a_second_ctrl_c_interrupts_a_stuck_node_only_after_a_while():
+    from manip_kin.nodes.runner import FORCE_INTERRUPT_AFTER_S
+
+    process = subprocess.Popen(
+        [sys.executable, "-c", CTRL_C_IN_A_CALLBACK, "stuck"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert process.stdout.readline().strip() == "stuck"
+        process.send_signal(signal.SIGINT)
+        first = time.monotonic()
+        time.sleep(0.1)
+        process.send_signal(signal.SIGINT)  # a launcher forwarding the terminal's Ctrl-C: dropped
+        time.sleep(max(0.0, first + FORCE_INTERRUPT_AFTER_S - 0.5 - time.monotonic()))
+        assert process.poll() is None, "a Ctrl-C soon after the first interrupted the callback"
+        time.sleep(max(0.0, first + FORCE_INTERRUPT_AFTER_S + 0.2 - time.monotonic()))
+        process.send_signal(signal.SIGINT)  # the user insists
+        code = process.wait(30)
+    finally:
+        process.kill()
+        process.wait()
+    assert code == 0, process.stderr.read()
+
+
 def test_cleanup_drops_the_keyboard_interrupt_of_the_signal_that_stopped_the_node(monkeypatch):
     """CPython's signal.signal() first runs the handlers of signals already received, so the
     SIGINT that ended spin() can raise KeyboardInterrupt inside the call that turns SIGINT off

@@ -13,6 +13,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 
 from rclpy.node import Node
@@ -106,6 +107,34 @@ def _exit_later_without_the_gil(exit_code: int, delay_s: float) -> bool:
         return False
 
 
+#: Seconds after a first Ctrl-C from which another one interrupts the node's Python code.
+FORCE_INTERRUPT_AFTER_S = 2.0
+
+
+class _CtrlCStopsThroughTheContext:
+    """Python's SIGINT handler, under rclpy's: no KeyboardInterrupt while the node stops.
+
+    rclpy's own handler already ends ``spin()`` by shutting the context down, and then chains
+    to Python's. Python's default raises KeyboardInterrupt at the next bytecode of whatever
+    callback runs, which can leave a half-done piece of work behind: one landed inside the
+    recorder's chunk write (the MCAP writer had emptied its chunk buffer and not yet its
+    index), and the file lost the chunk's messages. So the first Ctrl-C raises nothing, as
+    SIGTERM never did. A Ctrl-C ``FORCE_INTERRUPT_AFTER_S`` or more after the first (a node
+    stuck in a callback) raises as usual; an earlier one (a launcher forwarding the terminal's
+    Ctrl-C to a process that got it already) is dropped.
+    """
+
+    def __init__(self) -> None:
+        self.first_at: float | None = None
+
+    def __call__(self, signal_number: int, frame: object) -> None:
+        now = time.monotonic()
+        if self.first_at is None:
+            self.first_at = now
+        elif now - self.first_at >= FORCE_INTERRUPT_AFTER_S:
+            raise KeyboardInterrupt
+
+
 def _ignore_signals() -> None:
     """SIGINT and SIGTERM ignored from now on, at the Python level (the node is stopping)."""
     for signal_number in (signal.SIGINT, signal.SIGTERM):
@@ -114,9 +143,10 @@ def _ignore_signals() -> None:
                 signal.signal(signal_number, signal.SIG_IGN)
                 break
             except KeyboardInterrupt:
-                # signal.signal() first runs the handlers of signals already received: the
-                # SIGINT that stopped spin() can raise here (seen in a loaded test run). It
-                # asked for this cleanup: drop it and try again.
+                # signal.signal() first runs the handlers of signals already received: a
+                # forced Ctrl-C can raise here (before that handler existed, the SIGINT that
+                # stopped spin() did, in a loaded test run). It asked for this cleanup: drop it
+                # and try again.
                 continue
             except (ValueError, OSError):  # not the main thread (a test harness): nothing to do
                 break
@@ -156,7 +186,13 @@ def run_node(
     # SIGUSR1 writes every thread's Python stack to stderr (the node's log): what a supervisor
     # asks for before it SIGKILLs a node that did not stop (manip_kin.pipeline does).
     faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
-    # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin().
+    # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin(). Python's
+    # own SIGINT handler, which rclpy chains to, must be in place before rclpy.init.
+    ctrl_c = _CtrlCStopsThroughTheContext()
+    try:
+        signal.signal(signal.SIGINT, ctrl_c)
+    except ValueError:  # not the main thread (a test harness): Python's handler does not run there
+        pass
     try:
         rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
     except RuntimeError as error:  # rcl cannot parse the --ros-args (e.g. a list mixing 0 and 0.3)
@@ -165,6 +201,9 @@ def run_node(
             reason += " (a list of numbers needs one type: write 0.0, not 0, next to 0.3)"
         print(f"error: {reason}", file=sys.stderr)
         return 2
+    if ctrl_c.first_at is not None:  # Ctrl-C before rclpy's handler was there to stop the node
+        rclpy.try_shutdown()
+        return 0
     node = None
     exit_code = 0
     teardown_code = 1  # the exit code if teardown hangs: 1 unless spin ended as it should
@@ -198,9 +237,8 @@ def run_node(
                 if node.context.ok():
                     raise
         except KeyboardInterrupt:
-            # One SIGINT ends spin() twice: rclpy's handler shuts the context down (the
-            # ExternalShutdownException above) and chains to Python's, whose KeyboardInterrupt
-            # comes at the next bytecode, possibly inside the handler above. Seen in a test.
+            # A forced Ctrl-C (see _CtrlCStopsThroughTheContext) can come at any bytecode,
+            # possibly inside the handler above.
             pass
         teardown_code = exit_code
     finally:
