@@ -9,8 +9,13 @@ must hold every message published, with its values and stamps, read back by rosb
 from __future__ import annotations
 
 import os
+import queue
+import re
 import signal
 import subprocess
+import sys
+import sysconfig
+import threading
 import time
 from pathlib import Path
 
@@ -23,7 +28,7 @@ from sensor_msgs.msg import JointState
 from manip_kin.nodes.conversions import ns_to_stamp
 from manip_kin.nodes.polling import fast_path_problem
 
-RECORDER = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "recorder"
+RECORDER = Path(sysconfig.get_path("scripts")) / "recorder"
 PUBLISHED = 300
 
 
@@ -89,3 +94,74 @@ def test_both_intake_paths_record_every_message(ros, tmp_path, public):
         recorded = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
     assert [m.position[0] for m in recorded] == [float(i) for i in range(PUBLISHED)]
     assert [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in recorded] == stamps
+
+
+# The recorder with a wide window inside the MCAP writer's chunk write: between emptying the
+# chunk's buffer and its index (mcap's ChunkBuilder.end() and reset()), on the executor thread.
+RECORDER_WITH_A_SLOW_CHUNK_WRITE = """
+import sys, threading, time
+import mcap._chunk_builder as chunk_builder
+from manip_kin.nodes.recorder import main
+
+end = chunk_builder.ChunkBuilder.end
+
+def slow_end(self):
+    data = end(self)
+    if threading.current_thread() is threading.main_thread():
+        print("writing a chunk", flush=True)
+        time.sleep(0.3)
+    return data
+
+chunk_builder.ChunkBuilder.end = slow_end
+sys.exit(main(["recorder", *sys.argv[1:]]))
+"""
+
+
+def test_ctrl_c_during_a_chunk_write_loses_nothing(ros, tmp_path):
+    """Ctrl-C once raised KeyboardInterrupt inside the executor's periodic flush, half-way
+    through a chunk: the file then lacked the chunk's messages (summary 300, file 143 in a
+    loaded run). Here the Ctrl-C lands in that window every time."""
+    output = tmp_path / "run.mcap"
+    recorder = subprocess.Popen(
+        [sys.executable, "-c", RECORDER_WITH_A_SLOW_CHUNK_WRITE, "--ros-args", "-p", f"output:={output}"]
+        + ["-p", "topics:=[/joint_states]"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in recorder.stdout], daemon=True).start()
+    try:
+        publisher = ros.create_publisher(JointState, "/joint_states", 100)
+        deadline = time.monotonic() + 20
+        while publisher.get_subscription_count() == 0:
+            assert recorder.poll() is None and time.monotonic() < deadline, "the recorder never subscribed"
+            time.sleep(0.05)
+        time.sleep(0.3)
+        published = 0
+        deadline = time.monotonic() + 60
+        while True:
+            # A burst, then quiet: the intake thread flushes when it writes after the flush
+            # interval, so in the quiet the pending messages are the executor timer's to flush.
+            for _ in range(50):
+                publisher.publish(JointState(name=["j"], position=[float(published)]))
+                published += 1
+                time.sleep(0.002)
+            try:
+                lines.get(timeout=1.0)  # the executor's flush is inside a chunk write
+                break
+            except queue.Empty:
+                assert time.monotonic() < deadline, "no chunk write on the executor thread"
+        recorder.send_signal(signal.SIGINT)
+        _, stderr = recorder.communicate(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate(timeout=10)
+    assert recorder.returncode == 0, stderr
+    counted = re.search(r"recorded 1 topics, (\d+) messages", stderr)
+    assert counted and "0 dropped" in stderr, stderr
+    with AnyReader([output], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        positions = [reader.deserialize(raw, c.msgtype).position[0] for c, _, raw in reader.messages()]
+    assert positions == [float(i) for i in range(published)]
+    assert int(counted.group(1)) == published
