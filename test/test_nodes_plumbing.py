@@ -1,5 +1,6 @@
 """Node plumbing without ROS traffic: the rate loop, log throttling, parameter checks, --help."""
 
+import contextlib
 import signal
 import subprocess
 import sys
@@ -154,22 +155,30 @@ sys.exit(run_node(HangingTeardown, "usage", ["hanging_teardown"]))
 """
 
 
-@pytest.mark.parametrize("hang", ["sleep", "gil"])
-def test_a_node_whose_teardown_hangs_still_exits_with_its_code(hang):
+@contextlib.contextmanager
+def _python_process(script: str, argument: str, ready: str):
+    """``script`` run by a new Python with one argument; yields the process once it printed
+    ``ready``; killed and reaped at the end (its stderr stays readable)."""
     process = subprocess.Popen(
-        [sys.executable, "-c", HANGING_TEARDOWN, hang], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", script, argument], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     try:
-        assert process.stdout.readline().strip() == "ready"
+        assert process.stdout.readline().strip() == ready
+        yield process
+    finally:
+        process.kill()
+        process.wait()
+
+
+@pytest.mark.parametrize("hang", ["sleep", "gil"])
+def test_a_node_whose_teardown_hangs_still_exits_with_its_code(hang):
+    with _python_process(HANGING_TEARDOWN, hang, ready="ready") as process:
         process.send_signal(signal.SIGINT)
         signalled = time.monotonic()
         # The watchdog fires TEARDOWN_TIMEOUT_S (3 s) after the node stopped; 30 s leaves a loaded
         # machine room and is still half the hang, so a process without the watchdog fails here.
         code = process.wait(30)
         waited = time.monotonic() - signalled
-    finally:
-        process.kill()
-        process.wait()
     stderr = process.stderr.read()
     assert code == 0, stderr
     assert waited >= TEARDOWN_TIMEOUT_S
@@ -181,17 +190,10 @@ def test_a_node_whose_teardown_hangs_still_exits_with_its_code(hang):
 
 def test_a_node_dumps_its_stacks_on_sigusr1():
     """What the pipeline supervisor sends before a SIGKILL: every thread's stack, to stderr."""
-    process = subprocess.Popen(
-        [sys.executable, "-c", HANGING_TEARDOWN, "sleep"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    try:
-        assert process.stdout.readline().strip() == "ready"
+    with _python_process(HANGING_TEARDOWN, "sleep", ready="ready") as process:
         process.send_signal(signal.SIGUSR1)
         process.send_signal(signal.SIGINT)
         process.wait(30)
-    finally:
-        process.kill()
-        process.wait()
     stderr = process.stderr.read()
     assert stderr.count("most recent call first") >= 1 and "in run_node" in stderr, stderr
 
@@ -240,11 +242,7 @@ def test_ctrl_c_stops_a_node_without_interrupting_the_callback_that_runs():
 def test_a_second_ctrl_c_interrupts_a_stuck_node_only_after_a_while():
     from manip_kin.nodes.runner import FORCE_INTERRUPT_AFTER_S
 
-    process = subprocess.Popen(
-        [sys.executable, "-c", CTRL_C_IN_A_CALLBACK, "stuck"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-    try:
-        assert process.stdout.readline().strip() == "stuck"
+    with _python_process(CTRL_C_IN_A_CALLBACK, "stuck", ready="stuck") as process:
         process.send_signal(signal.SIGINT)
         first = time.monotonic()
         time.sleep(0.1)
@@ -254,16 +252,14 @@ def test_a_second_ctrl_c_interrupts_a_stuck_node_only_after_a_while():
         time.sleep(max(0.0, first + FORCE_INTERRUPT_AFTER_S + 0.2 - time.monotonic()))
         process.send_signal(signal.SIGINT)  # the user insists
         code = process.wait(30)
-    finally:
-        process.kill()
-        process.wait()
     assert code == 0, process.stderr.read()
 
 
 def test_cleanup_drops_the_keyboard_interrupt_of_the_signal_that_stopped_the_node(monkeypatch):
-    """CPython's signal.signal() first runs the handlers of signals already received, so the
-    SIGINT that ended spin() can raise KeyboardInterrupt inside the call that turns SIGINT off
-    (seen in a loaded run: the node exited -2). The cleanup drops it and turns the signal off."""
+    """CPython's signal.signal() first runs the handlers of signals already received, so a
+    pending KeyboardInterrupt (a forced Ctrl-C; before run_node's own SIGINT handler, the SIGINT
+    that ended spin(), seen in a loaded run: the node exited -2) can raise inside the call that
+    turns SIGINT off. The cleanup drops it and turns the signal off."""
     from manip_kin.nodes import runner
 
     installed = []

@@ -8,6 +8,7 @@ must hold every message published, with its values and stamps, read back by rosb
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import re
@@ -44,6 +45,31 @@ def ros():
         rclpy.try_shutdown(context=context)
 
 
+@contextlib.contextmanager
+def _recording(ros, command: list[str], output: Path, env: dict | None = None):
+    """The recorder (``command``) recording /joint_states to ``output``; yields it and a
+    publisher it has subscribed to; killed at the end if still running."""
+    recorder = subprocess.Popen(
+        [*command, "--ros-args", "-p", f"output:={output}", "-p", "topics:=[/joint_states]"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        publisher = ros.create_publisher(JointState, "/joint_states", 100)
+        deadline = time.monotonic() + 20
+        while publisher.get_subscription_count() == 0:
+            assert recorder.poll() is None and time.monotonic() < deadline, "the recorder never subscribed"
+            time.sleep(0.05)
+        time.sleep(0.3)
+        yield recorder, publisher
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate(timeout=10)
+
+
 def test_fast_path_is_used_on_the_checked_rclpy():
     assert fast_path_problem() == ""
     os.environ["MANIP_KIN_PUBLIC_RCLPY"] = "1"
@@ -59,20 +85,7 @@ def test_both_intake_paths_record_every_message(ros, tmp_path, public):
     if public:
         env["MANIP_KIN_PUBLIC_RCLPY"] = "1"
     output = tmp_path / "run.mcap"
-    recorder = subprocess.Popen(
-        [str(RECORDER), "--ros-args", "-p", f"output:={output}", "-p", "topics:=[/joint_states]"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
-    try:
-        publisher = ros.create_publisher(JointState, "/joint_states", 100)
-        deadline = time.monotonic() + 20
-        while publisher.get_subscription_count() == 0:
-            assert recorder.poll() is None and time.monotonic() < deadline, "the recorder never subscribed"
-            time.sleep(0.05)
-        time.sleep(0.3)
+    with _recording(ros, [str(RECORDER)], output, env) as (recorder, publisher):
         stamps = []
         for i in range(PUBLISHED):
             message = JointState(name=["j"], position=[float(i)])
@@ -83,10 +96,6 @@ def test_both_intake_paths_record_every_message(ros, tmp_path, public):
         time.sleep(0.5)
         recorder.send_signal(signal.SIGINT)
         _, stderr = recorder.communicate(timeout=30)
-    finally:
-        if recorder.poll() is None:
-            recorder.kill()
-            recorder.communicate(timeout=10)
     assert recorder.returncode == 0, stderr
     assert ("intake: public rclpy API" in stderr) == public, stderr
     assert f"recorded 1 topics, {PUBLISHED} messages" in stderr and "0 dropped" in stderr, stderr
@@ -122,22 +131,9 @@ def test_ctrl_c_during_a_chunk_write_loses_nothing(ros, tmp_path):
     through a chunk: the file then lacked the chunk's messages (summary 300, file 143 in a
     loaded run). Here the Ctrl-C lands in that window every time."""
     output = tmp_path / "run.mcap"
-    recorder = subprocess.Popen(
-        [sys.executable, "-c", RECORDER_WITH_A_SLOW_CHUNK_WRITE, "--ros-args", "-p", f"output:={output}"]
-        + ["-p", "topics:=[/joint_states]"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    lines: queue.Queue[str] = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(line) for line in recorder.stdout], daemon=True).start()
-    try:
-        publisher = ros.create_publisher(JointState, "/joint_states", 100)
-        deadline = time.monotonic() + 20
-        while publisher.get_subscription_count() == 0:
-            assert recorder.poll() is None and time.monotonic() < deadline, "the recorder never subscribed"
-            time.sleep(0.05)
-        time.sleep(0.3)
+    with _recording(ros, [sys.executable, "-c", RECORDER_WITH_A_SLOW_CHUNK_WRITE], output) as (recorder, publisher):
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(line) for line in recorder.stdout], daemon=True).start()
         published = 0
         deadline = time.monotonic() + 60
         while True:
@@ -154,10 +150,6 @@ def test_ctrl_c_during_a_chunk_write_loses_nothing(ros, tmp_path):
                 assert time.monotonic() < deadline, "no chunk write on the executor thread"
         recorder.send_signal(signal.SIGINT)
         _, stderr = recorder.communicate(timeout=30)
-    finally:
-        if recorder.poll() is None:
-            recorder.kill()
-            recorder.communicate(timeout=10)
     assert recorder.returncode == 0, stderr
     counted = re.search(r"recorded 1 topics, (\d+) messages", stderr)
     assert counted and "0 dropped" in stderr, stderr
