@@ -81,6 +81,25 @@ class Harness:
             self.executor.spin_once(timeout_sec=0.002)
         return predicate()
 
+    def logged(self, node, capfd, timeout: float = 5.0, every=None) -> str:
+        """Everything written to stderr so far, read once ``node``'s loop finished the cycle it runs now.
+
+        A node counts a rejection and then logs it, in its loop thread. Polling
+        ``capfd.readouterr()`` meanwhile can lose the line: pytest reads the capture file and
+        then truncates it, and a line written in between is gone (a test failed so once).
+        """
+
+        def cycles_begun_or_ended() -> int:
+            stats = node.loop.stats()
+            return (
+                stats.cycles + stats.woken
+            )  # every cycle but the first adds one: at its start if woken, else at its end
+
+        start = cycles_begun_or_ended()
+        # Two more: the cycle running at the start has ended, however each was counted.
+        assert self.spin_until(lambda: cycles_begun_or_ended() >= start + 2, timeout, every=every), "the loop stalled"
+        return capfd.readouterr().err
+
     def close(self) -> None:
         for node in self.nodes:
             node.stop()
