@@ -7,7 +7,8 @@ STAMP := $(VENV)/.installed
 # The demo and the bench stay on loopback unless the caller's environment says otherwise (a
 # value set in your shell wins; make changes nothing in your shell); the tests always do
 # (test/conftest.py). Each run picks a free ROS_DOMAIN_ID itself (demo and bench through
-# manip_kin.pipeline.ensure_ros_isolation, tests in test/conftest.py) unless one is set.
+# manip_kin.pipeline.ensure_ros_isolation, tests in test/conftest.py) unless one is set, and
+# keeps it reserved while it runs (manip_kin.pipeline.pick_free_domain).
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)

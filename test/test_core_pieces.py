@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -19,7 +21,7 @@ from manip_kin.errors import (
     exit_code_for,
 )
 from manip_kin.joint_integration import integrate_joint_rates
-from manip_kin.pipeline import PipelineError
+from manip_kin.pipeline import PipelineError, pick_free_domain
 from manip_kin.recording.errors import RecordingError
 from manip_kin.rotations import rotvec_from_entries, rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.source_inline import inline_lines
@@ -35,6 +37,31 @@ def test_input_errors_and_failures_are_separate_families():
     assert exit_code_for(UnknownRobotError("nosuchbot", ["genova7"])) == 2
     assert exit_code_for(PipelineError("robot_state exited")) == 1
     assert exit_code_for(ManipKinError("nothing to plot")) == 1
+
+
+HOLD_A_DOMAIN = """
+import sys
+from manip_kin.pipeline import pick_free_domain
+print(pick_free_domain(), flush=True)
+sys.stdin.read()  # hold it until the test closes stdin
+"""
+
+
+def test_a_picked_domain_stays_reserved_while_its_process_lives():
+    """Between two tests a test session has no participant on its domain: a benchmark started
+    then once picked the same domain, and the two runs saw each other's topics."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLD_A_DOMAIN], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        held = int(holder.stdout.readline())
+        every_other = [str(d) for d in range(1, 101) if d != held]
+        with pytest.raises(PipelineError, match="no free ROS_DOMAIN_ID"):
+            pick_free_domain(exclude=every_other)  # the only candidate is reserved
+    finally:
+        holder.stdin.close()
+        assert holder.wait(30) == 0
+    assert pick_free_domain(exclude=every_other) == held  # free again once its process ended
 
 
 def test_node_runner_exit_codes(monkeypatch):

@@ -5,16 +5,51 @@ tests and the benchmark runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and ``ROS_DO
 set; when the caller set neither, :func:`ensure_ros_isolation` picks LOCALHOST and a free
 domain for this process and its children (a caller's values are never overridden, so a
 user who runs the nodes across machines with ``SUBNET`` keeps it).
+
+A picked domain stays reserved while the process that picked it lives (a lock file per
+domain in the temp directory): a test session between two tests has no participant on its
+domain, and a benchmark started then once took the same one, mixing the two runs' topics.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import random
 import socket
+import tempfile
 from collections.abc import Iterable, Mapping
 
 from manip_kin.pipeline.errors import PipelineError
+
+#: Lock files of the domains this process reserved, by domain; open until the process ends.
+_reserved: dict[int, int] = {}
+
+
+def _lock_path(domain_id: int) -> str:
+    return os.path.join(tempfile.gettempdir(), f"manip_kin_ros_domain_{domain_id}.lock")
+
+
+def _reserve(domain_id: int) -> bool:
+    """Take the machine-wide lock on ``domain_id`` for the rest of this process; False when
+    another process (or this one, earlier) holds it."""
+    try:
+        descriptor = os.open(_lock_path(domain_id), os.O_RDONLY | os.O_CREAT, 0o444)
+    except OSError:  # an unusable temp directory: the participant probe alone decides
+        return True
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(descriptor)
+        return False
+    _reserved[domain_id] = descriptor
+    return True
+
+
+def _release(domain_id: int) -> None:
+    descriptor = _reserved.pop(domain_id, None)
+    if descriptor is not None:
+        os.close(descriptor)
 
 
 def _domain_is_free(domain_id: int) -> bool:
@@ -28,7 +63,8 @@ def _domain_is_free(domain_id: int) -> bool:
 
 
 def pick_free_domain(exclude: Iterable[str] = ()) -> int:
-    """A random ``ROS_DOMAIN_ID`` in 1..100 that no local participant uses.
+    """A random ``ROS_DOMAIN_ID`` in 1..100 that no local participant uses and no other
+    manip_kin process reserved; it stays reserved while this process lives.
 
     Raises:
         PipelineError: every domain is taken (sharing one would mix two runs' topics).
@@ -37,8 +73,11 @@ def pick_free_domain(exclude: Iterable[str] = ()) -> int:
     candidates = [d for d in range(1, 101) if str(d) not in excluded]
     random.SystemRandom().shuffle(candidates)
     for domain_id in candidates:
+        if not _reserve(domain_id):
+            continue
         if _domain_is_free(domain_id):
             return domain_id
+        _release(domain_id)
     raise PipelineError("no free ROS_DOMAIN_ID in 1..100 on this machine")
 
 
