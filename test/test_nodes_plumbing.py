@@ -189,13 +189,29 @@ def test_a_node_whose_teardown_hangs_still_exits_with_its_code(hang):
 
 
 def test_a_node_dumps_its_stacks_on_sigusr1():
-    """What the pipeline supervisor sends before a SIGKILL: every thread's stack, to stderr."""
+    """What the pipeline supervisor sends before a SIGKILL (to a node that is stuck): every
+    thread's stack, to stderr, and the node runs on."""
     with _python_process(HANGING_TEARDOWN, "sleep", ready="ready") as process:
+        lines: list[str] = []
+        dumped = threading.Event()
+
+        def read_stderr() -> None:
+            for line in process.stderr:
+                lines.append(line)
+                if "in run_node" in line:
+                    dumped.set()
+
+        threading.Thread(target=read_stderr, daemon=True).start()
         process.send_signal(signal.SIGUSR1)
+        # The stop waits for the whole dump: faulthandler walks every thread's frames without
+        # the GIL, and a Ctrl-C right behind it, changing the main thread's frames mid-walk,
+        # once left the dump cut off at its first frame and the process gone.
+        assert dumped.wait(30), "".join(lines)
+        assert process.poll() is None
         process.send_signal(signal.SIGINT)
-        process.wait(30)
-    stderr = process.stderr.read()
-    assert stderr.count("most recent call first") >= 1 and "in run_node" in stderr, stderr
+        code = process.wait(30)
+    assert code == 0, "".join(lines)
+    assert "".join(lines).count("most recent call first") >= 1
 
 
 CTRL_C_IN_A_CALLBACK = """
