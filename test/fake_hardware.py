@@ -58,6 +58,8 @@ class FakeHardware:
         self._command_time = 0.0
         self._timeout = command_timeout
         self._lock = threading.Lock()
+        #: The arm joint positions after each integration step: the path the arm took.
+        self.history: list[np.ndarray] = []
         self._context = rclpy.Context()
         rclpy.init(context=self._context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         self.node = rclpy.create_node("fake_hardware", context=self._context)
@@ -98,6 +100,7 @@ class FakeHardware:
             if self._command is not None and now - self._command_time <= self._timeout:
                 self.q = self.q + self._command * dt
             q = self.q.copy()
+            self.history.append(q)
         msg = JointState()
         msg.header.stamp = self.node.get_clock().now().to_msg()
         # The hardware's own order: the gripper first, the arm joints reversed.

@@ -10,7 +10,6 @@ says the arm is.
 """
 
 import re
-import threading
 
 import numpy as np
 import pytest
@@ -79,20 +78,11 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         start = frame_pose(model, hardware.positions())
         target = start.copy()
         target[:3, 3] += [0.04, 0.0, -0.02]
-        # The tool's path, sampled from the hardware while the line runs.
-        path, line_done = [], threading.Event()
-
-        def sample_path():
-            while not line_done.wait(0.005):
-                path.append(frame_pose(model, hardware.positions())[:3, 3])
-
-        sampler = threading.Thread(target=sample_path)
-        sampler.start()
-        try:
-            done = client.wait_line_done(client.send_line(target, frame_id=model.base_frame), 60)
-        finally:
-            line_done.set()
-            sampler.join()
+        # The tool's path: the hardware's own positions at each of its steps while the line runs
+        # (a thread sampling them in this busy process once got 11 samples, all at the start).
+        first_step = len(hardware.history)
+        done = client.wait_line_done(client.send_line(target, frame_id=model.base_frame), 60)
+        path = np.array([frame_pose(model, q)[:3, 3] for q in hardware.history[first_step:]])
         assert done.message == "holding", (done.message, pipeline.log_tail("trajectory_generator"))
         converged, status = client.wait_converged(done.values["final_goal_stamp"], timeout=60)
         assert converged, (status, pipeline.log_tail("cartesian_controller"))
