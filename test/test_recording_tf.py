@@ -24,7 +24,7 @@ from manip_kin.kinematics import frame_pose
 from manip_kin.nodes.conversions import make_pose_stamped, ns_to_stamp
 from manip_kin.recording import RecordingWriter, read_info
 from manip_kin.recording.qos import default_offer
-from manip_kin.recording.tf_synthesis import add_tf
+from manip_kin.recording.tf_synthesis import TfSynthesizer, add_tf
 from manip_kin.robots import bundled_robot_names, load_robot
 from manip_kin.rotations import quat_to_matrix
 from manip_kin.urdf import model_to_urdf
@@ -196,3 +196,26 @@ def test_plot_animates_the_arm_from_tf(tmp_path):
         timeout=300,
     )
     assert bare.returncode == 2 and "--add-tf" in bare.stderr
+
+
+def test_no_tf_is_logged_before_its_tf_static():
+    """The recorder drains topic by topic, so a joint state received before the description can
+    be fed after it; its /tf, logged before the /tf_static, once left a reader going by log time
+    without the tool frame (a loaded test run)."""
+    from rclpy.serialization import serialize_message
+
+    model = load_robot("irb120")
+    description = serialize_message(String(data=model_to_urdf(model)))
+    synthesizer = TfSynthesizer(rate_hz=1000.0)
+    static = synthesizer.feed("/robot_description", "std_msgs/msg/String", description, 2_000_000_000)
+    assert [out.topic for out in static] == ["/tf_static"]
+
+    def joint_state(stamp_ns: int) -> bytes:
+        message = JointState(name=list(model.joint_names), position=[0.1] * len(model.joint_names))
+        message.header.stamp = ns_to_stamp(stamp_ns)
+        return serialize_message(message)
+
+    early = synthesizer.feed("/joint_states", "sensor_msgs/msg/JointState", joint_state(1_990_000_000), 1_999_000_000)
+    assert early == []
+    later = synthesizer.feed("/joint_states", "sensor_msgs/msg/JointState", joint_state(2_001_000_000), 2_001_000_000)
+    assert [out.topic for out in later] == ["/tf"] and later[0].log_time_ns >= static[0].log_time_ns

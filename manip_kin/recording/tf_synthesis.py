@@ -63,6 +63,7 @@ class _Arm:
     decimator: StampDecimator | None = None
     joint_states: int = 0
     problem: str = ""
+    static_log_time_ns: int = 0  # when its /tf_static was logged: no /tf before it
 
 
 @dataclass
@@ -103,6 +104,7 @@ class TfSynthesizer:
             return []
         arm.decimator = StampDecimator(self.rate_hz)
         arm.problem = ""
+        arm.static_log_time_ns = log_time_ns
         self.static_count += 1
         data = encode_tf_message(log_time_ns, static_transforms(arm.tree, self.frame_prefix))
         return [TfOutput(TF_STATIC_TOPIC, data, log_time_ns, log_time_ns)]
@@ -111,6 +113,11 @@ class TfSynthesizer:
         arm = self._arms.setdefault(namespace, _Arm())
         arm.joint_states += 1
         if arm.tree is None or arm.decimator is None:
+            return []
+        if log_time_ns < arm.static_log_time_ns:
+            # Received before the description, taken after it (the recorder drains topic by
+            # topic): a /tf logged before its /tf_static would name frames a reader, going by
+            # log time, cannot place yet.
             return []
         stamp_ns = header_stamp_ns(data) or log_time_ns
         if not arm.decimator.due(stamp_ns):
