@@ -209,7 +209,12 @@ def test_a_node_dumps_its_stacks_on_sigusr1():
         assert dumped.wait(30), "".join(lines)
         assert process.poll() is None
         process.send_signal(signal.SIGINT)
-        code = process.wait(30)
+        try:
+            code = process.wait(30)
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGUSR1)  # where it stands now, for the message below
+            time.sleep(1.0)
+            raise AssertionError("the node did not stop:\n" + "".join(lines)) from None
     assert code == 0, "".join(lines)
     assert "".join(lines).count("most recent call first") >= 1
 
