@@ -219,6 +219,53 @@ def test_a_node_dumps_its_stacks_on_sigusr1():
     assert "".join(lines).count("most recent call first") >= 1
 
 
+LATE_CONTEXT_SHUTDOWN = """
+import signal, sys, threading, time
+from rclpy.node import Node
+from manip_kin.nodes.runner import run_node
+
+class NothingToWakeIt(Node):
+    \"\"\"After its first callback the executor has nothing that could wake it: no timer, no
+    subscription.\"\"\"
+
+    def __init__(self):
+        super().__init__("nothing_to_wake_it")
+        self.timer = self.create_timer(0.01, self.start)
+
+    def start(self):
+        self.timer.cancel()
+        threading.Thread(target=self.ctrl_c_with_a_late_shutdown, daemon=True).start()
+
+    def ctrl_c_with_a_late_shutdown(self):
+        # What rclpy's signal thread does on SIGINT, in the order it does it, with its context
+        # shutdown landing after the executor has woken, found the context valid and gone back to
+        # its wait. Python's SIGINT handler runs at the woken main thread's first bytecode.
+        time.sleep(0.2)
+        signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+        self.executor._sigint_gc.trigger()  # rclpy's signal thread wakes every executor ...
+        time.sleep(0.5)
+        print("shutting the context down", flush=True)
+        with self.context.handle:
+            self.context.handle.shutdown()  # ... then shuts the contexts down, waking nothing
+
+sys.exit(run_node(NothingToWakeIt, "usage", ["nothing_to_wake_it"]))
+"""
+
+
+def test_ctrl_c_stops_a_node_whose_context_shutdown_lands_after_its_executor_waits_again():
+    """rclpy's signal thread triggers the executors' guard conditions, then shuts the contexts
+    down, and that wakes no executor: one that woke in between and went back to its wait slept on
+    with a shut-down context (a node with no timer left, 2 of 45 runs under load)."""
+    try:
+        result = subprocess.run(
+            [sys.executable, "-c", LATE_CONTEXT_SHUTDOWN], capture_output=True, text=True, timeout=30
+        )
+    except subprocess.TimeoutExpired as stuck:
+        raise AssertionError(f"the node did not stop: {stuck.stdout!r} {stuck.stderr!r}") from None
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == "shutting the context down\n"
+
+
 CTRL_C_IN_A_CALLBACK = """
 import os, signal, sys, time
 from rclpy.node import Node

@@ -111,28 +111,61 @@ def _exit_later_without_the_gil(exit_code: int, delay_s: float) -> bool:
 FORCE_INTERRUPT_AFTER_S = 2.0
 
 
-class _CtrlCStopsThroughTheContext:
-    """Python's SIGINT handler, under rclpy's: no KeyboardInterrupt while the node stops.
+class _StopSignals:
+    """Python's SIGINT and SIGTERM handler, under rclpy's: the node stops, nothing is raised.
 
-    rclpy's own handler already ends ``spin()`` by shutting the context down, and then chains
-    to Python's. Python's default raises KeyboardInterrupt at the next bytecode of whatever
-    callback runs, which can leave a half-done piece of work behind: one landed inside the
-    recorder's chunk write (the MCAP writer had emptied its chunk buffer and not yet its
-    index), and the file lost the chunk's messages. So the first Ctrl-C raises nothing, as
-    SIGTERM never did. A Ctrl-C ``FORCE_INTERRUPT_AFTER_S`` or more after the first (a node
-    stuck in a callback) raises as usual; an earlier one (a launcher forwarding the terminal's
-    Ctrl-C to a process that got it already) is dropped.
+    rclpy's own handler ends ``spin()`` (its signal thread wakes the executors, then shuts the
+    contexts down) and then chains to Python's. Python's default SIGINT handler raises
+    KeyboardInterrupt at the next bytecode of whatever callback runs, which can leave a
+    half-done piece of work behind: one landed inside the recorder's chunk write (the MCAP
+    writer had emptied its chunk buffer and not yet its index), and the file lost the chunk's
+    messages. So the first signal raises nothing, as SIGTERM never did; it sets
+    :attr:`received`, on which :func:`_wake_the_executor_once_stopped` acts. A Ctrl-C
+    ``FORCE_INTERRUPT_AFTER_S`` or more after the first (a node stuck in a callback) raises as
+    usual; an earlier one (a launcher forwarding the terminal's Ctrl-C to a process that got it
+    already) is dropped.
     """
 
     def __init__(self) -> None:
         self.first_at: float | None = None
+        self.received = threading.Event()
 
     def __call__(self, signal_number: int, frame: object) -> None:
         now = time.monotonic()
         if self.first_at is None:
             self.first_at = now
-        elif now - self.first_at >= FORCE_INTERRUPT_AFTER_S:
+            self.received.set()
+        elif signal_number == signal.SIGINT and now - self.first_at >= FORCE_INTERRUPT_AFTER_S:
             raise KeyboardInterrupt
+
+
+#: Seconds a stop signal leaves rclpy's signal thread to shut the context down before the
+#: executor is woken anyway.
+CONTEXT_SHUTDOWN_WAIT_S = 5.0
+
+
+def _wake_the_executor_once_stopped(stop_signals: _StopSignals, node: Node, executor: object) -> None:
+    """Wake ``executor`` once a stop signal has come and the node's context is shut down.
+
+    rclpy's signal thread wakes the executors *before* it shuts the contexts down, and the
+    shutdown itself wakes nothing: an executor that woke in between, found its context still
+    valid and went back to its wait slept on with a shut-down context, until a timer or a
+    message came (a node with neither did not stop, 2 of 45 runs under load). A daemon thread
+    waits for the signal and the shutdown, then wakes the executor, which then sees the
+    shut-down context and ends ``spin()``.
+    """
+
+    def watch() -> None:
+        stop_signals.received.wait()
+        deadline = time.monotonic() + CONTEXT_SHUTDOWN_WAIT_S
+        try:
+            while node.context.ok() and time.monotonic() < deadline:
+                time.sleep(0.001)
+            executor.wake()
+        except Exception:  # noqa: BLE001 - the executor is already gone: nothing left to wake
+            pass
+
+    threading.Thread(target=watch, name="wake_executor_on_stop", daemon=True).start()
 
 
 def _ignore_signals() -> None:
@@ -187,12 +220,13 @@ def run_node(
     # asks for before it SIGKILLs a node that did not stop (manip_kin.pipeline does).
     faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
     # ALL: rclpy turns both SIGINT and SIGTERM into a context shutdown that ends spin(). Python's
-    # own SIGINT handler, which rclpy chains to, must be in place before rclpy.init.
-    ctrl_c = _CtrlCStopsThroughTheContext()
-    try:
-        signal.signal(signal.SIGINT, ctrl_c)
-    except ValueError:  # not the main thread (a test harness): Python's handler does not run there
-        pass
+    # own handlers, which rclpy chains to, must be in place before rclpy.init.
+    stop_signals = _StopSignals()
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(signal_number, stop_signals)
+        except ValueError:  # not the main thread (a test harness): Python's handler does not run there
+            break
     try:
         rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
     except RuntimeError as error:  # rcl cannot parse the --ros-args (e.g. a list mixing 0 and 0.3)
@@ -201,7 +235,7 @@ def run_node(
             reason += " (a list of numbers needs one type: write 0.0, not 0, next to 0.3)"
         print(f"error: {reason}", file=sys.stderr)
         return 2
-    if ctrl_c.first_at is not None:  # Ctrl-C before rclpy's handler was there to stop the node
+    if stop_signals.first_at is not None:  # a stop signal before rclpy's handler was there
         rclpy.try_shutdown()
         return 0
     node = None
@@ -225,6 +259,7 @@ def run_node(
             try:  # a signal may land before spin() starts: the same clean stop
                 executor = SingleThreadedExecutor()
                 executor.add_node(node)
+                _wake_the_executor_once_stopped(stop_signals, node, executor)
                 executor.spin()
             except (KeyboardInterrupt, ExternalShutdownException):
                 pass
@@ -237,7 +272,7 @@ def run_node(
                 if node.context.ok():
                     raise
         except KeyboardInterrupt:
-            # A forced Ctrl-C (see _CtrlCStopsThroughTheContext) can come at any bytecode,
+            # A forced Ctrl-C (see _StopSignals) can come at any bytecode,
             # possibly inside the handler above.
             pass
         teardown_code = exit_code
