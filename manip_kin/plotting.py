@@ -202,6 +202,13 @@ def _model_from_description(run: RunData):
         return None
 
 
+def _legend(axis, **options) -> None:
+    """A legend when ``axis`` holds a labelled artist (matplotlib warns about an empty one, as
+    for a recording without ``/joint_velocity_commands``)."""
+    if axis.get_legend_handles_labels()[1]:
+        axis.legend(**options)
+
+
 def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     """Write every figure of :data:`FIGURES` for ``run`` into ``out_dir``; returns the paths."""
     import matplotlib
@@ -231,7 +238,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
                 run.goal.time, run.goal.position[:, i], where="post", linestyle="--", label=f"reference {axis_name}"
             )
         axes[i].set_ylabel(f"{axis_name} [m]")
-        axes[i].legend(loc="best", fontsize="small")
+        _legend(axes[i], loc="best", fontsize="small")
         axes[i].grid(True, alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     axes[0].set_title(f"{prefix}tool position vs reference (base frame)")
@@ -247,7 +254,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     axis.set_ylabel("error norm")
     axis.set_title(f"{prefix}tool error against the current goal")
     axis.grid(True, which="both", alpha=0.3)
-    axis.legend()
+    _legend(axis)
     save(figure, "errors.png")
 
     # 3. velocities
@@ -261,7 +268,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     axes[0].set_title(f"{prefix}tool and end-effector velocity w.r.t. base")
     for axis in axes:
         axis.grid(True, alpha=0.3)
-        axis.legend(loc="best", fontsize="small")
+        _legend(axis, loc="best", fontsize="small")
     save(figure, "velocities.png")
 
     # 4. joint positions with limits
@@ -300,7 +307,9 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
     axis.set_ylabel("commanded rate [rad/s | m/s]")
     axis.set_title(f"{prefix}joint-rate commands (/joint_velocity_commands)")
     axis.grid(True, alpha=0.3)
-    axis.legend(loc="best", fontsize="small", ncol=2)
+    if not len(run.command_time):
+        axis.text(0.5, 0.5, "no /joint_velocity_commands in this recording", transform=axis.transAxes, ha="center")
+    _legend(axis, loc="best", fontsize="small", ncol=2)
     save(figure, "joint_rate_commands.png")
 
     # 6. 3D path and arm snapshots
@@ -348,7 +357,7 @@ def plot_run(run: RunData, out_dir: str | Path, title: str = "") -> list[Path]:
         # Equal scales on x, y and z, so a straight line and the arm's proportions look as they are.
         equal_3d_axes(axis, np.vstack(drawn))
     axis.set_title(f"{prefix}tool path, planned line and arm (base frame)")
-    axis.legend(loc="upper left", fontsize="small")
+    _legend(axis, loc="upper left", fontsize="small")
     save(figure, "path_3d.png")
 
     if run.arm is not None:
