@@ -91,7 +91,8 @@ def is_rotation(matrix, tolerance: float = 1e-6) -> bool:
     m = np.asarray(matrix, dtype=float)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return False
-    return bool(np.allclose(m @ m.T, np.eye(3), atol=tolerance) and abs(np.linalg.det(m) - 1.0) < tolerance)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: inf, then False, not a warning
+        return bool(np.allclose(m @ m.T, np.eye(3), atol=tolerance) and abs(np.linalg.det(m) - 1.0) < tolerance)
 
 
 def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> np.ndarray:
@@ -101,8 +102,9 @@ def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> n
         raise NotARotationError(f"{what} has shape {m.shape}; a rotation is a 3x3 matrix")
     check_finite(m, what)
     if not is_rotation(m, tolerance):
-        det = float(np.linalg.det(m))
-        error = float(np.abs(m @ m.T - np.eye(3)).max())
+        with np.errstate(over="ignore", invalid="ignore"):
+            det = float(np.linalg.det(m))
+            error = float(np.abs(m @ m.T - np.eye(3)).max())
         raise NotARotationError(
             f"{what} is not a rotation matrix (det {det:.6g}, |R Rᵀ - I| {error:.3g}); "
             f"valid: orthonormal with det +1 within {tolerance:g}"

@@ -222,7 +222,8 @@ class LineTrajectory:
             if pose.shape != (4, 4):
                 raise InvalidArgumentError(f"{what} has shape {pose.shape}; valid: (4, 4)")
             check_rotation(pose[:3, :3], f"{what} rotation")
-        length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
+        with np.errstate(over="ignore"):  # a distance past 1e308 m is inf, which the scaling rejects
+            length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
         angle = float(np.linalg.norm(matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])))
         return cls(start, goal, make_time_scaling(kind, length, angle, limits))
 

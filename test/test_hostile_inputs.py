@@ -36,6 +36,9 @@ from manip_kin.robots import load_robot
 from manip_kin.state_prediction import MAX_STATE_AGE_PERIODS, PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits, make_time_scaling
 
+# Hostile input gets an error, not numpy's overflow warnings on the user's terminal first.
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 MODEL = load_robot("genova7")  # 7 joints, one prismatic: both joint kinds
 BOUNDS = InputBounds.of(MODEL)
 Q0 = MODEL.start_configuration()
