@@ -118,6 +118,17 @@ def test_help_lists_parameters_topics_and_example(executable):
     assert "--ros-args -p robot:=" in text and "Subscribes:" in text and "Publishes:" in text
 
 
+@pytest.mark.parametrize("executable", ["robot_state", "recorder"])
+def test_help_into_a_pipe_whose_reader_left_exits_0_quietly(executable):
+    """``robot_state --help | head -1``: the reader is gone before the usage is written."""
+    path = Path(sysconfig.get_path("scripts")) / executable
+    process = subprocess.Popen([str(path), "--help"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process.stdout.close()  # before the interpreter has started, let alone printed
+    stderr = process.stderr.read()
+    assert process.wait(60) == 0, stderr
+    assert stderr == ""
+
+
 def test_bad_parameter_exits_2_with_one_line():
     path = Path(sysconfig.get_path("scripts")) / "robot_state"
     result = subprocess.run(

@@ -30,7 +30,12 @@ def wants_help(argv: Sequence[str], usage: str) -> bool:
     if "--ros-args" in user_args:
         user_args = user_args[: user_args.index("--ros-args")]
     if "-h" in user_args or "--help" in user_args:
-        print(usage)
+        try:
+            print(usage, flush=True)
+        except BrokenPipeError:
+            # `robot_state --help | head`: the reader left, as it may. Later writes (the flush at
+            # exit) go nowhere instead of ending in a traceback and exit code 1.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return True
     return False
 
