@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
+from hypothesis import given
+from hypothesis import strategies as st
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -67,6 +69,18 @@ def test_stamps():
     assert conv.stamp_to_ns(stamp) == 12_000_000_123
     assert conv.stamp_key(stamp) == "12.000000123"
     assert math.isclose(conv.stamp_to_seconds(stamp), 12.000000123)
+
+
+@given(st.integers(0, 2**31 - 1), st.integers(0, 999_999_999))
+def test_stamp_key_reads_back_to_its_time(sec, nanosec):
+    stamp = Time(sec=sec, nanosec=nanosec)
+    assert conv.stamp_key_to_ns(conv.stamp_key(stamp)) == conv.stamp_to_ns(stamp)
+
+
+@pytest.mark.parametrize("text", ["", "12", "12.5", "12.0000001234", "a.000000001", "1.00000000x"])
+def test_stamp_key_to_ns_refuses_other_text(text):
+    with pytest.raises(ValueError):
+        conv.stamp_key_to_ns(text)
 
 
 def test_joint_state_mapper_reorders_by_name_and_reports_problems():

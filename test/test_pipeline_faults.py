@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +83,42 @@ def test_recorder_killed_leaves_a_file_salvage_recovers(tmp_path):
     assert len(stamps) > 200, report
     assert all(stamp in set(seen) or stamp < min(seen) for stamp in stamps)
     assert stamps == sorted(stamps)
+
+
+@pytest.mark.parametrize("topic", ["goal_pose", "line_target"])
+def test_a_goal_lost_on_the_way_is_sent_again(tmp_path, topic):
+    """A reliable volatile reader that matches the writer after a sample went out acknowledges it
+    without having it: the goal is lost although "delivered" (a CLI goal under load, once). The
+    client sends a goal or line target again that its node has not reported; here the first
+    publish is dropped on purpose."""
+    from geometry_msgs.msg import PoseStamped
+
+    from manip_kin.pipeline.client import GOAL_RESEND_AFTER_S, GOAL_RESENDS
+
+    with Pipeline(pipeline_processes("genova7", rate_hz=200.0), env=fresh_domain_env(), log_dir=tmp_path) as pipeline:
+        client = pipeline.client()
+        publisher = client.publisher(PoseStamped, topic)
+        publish, published_at = publisher.publish, []
+
+        def first_one_lost(msg):
+            published_at.append(time.monotonic())
+            if len(published_at) > 1:
+                publish(msg)
+
+        publisher.publish = first_one_lost
+        if topic == "goal_pose":
+            stamp = client.send_goal(make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3]))
+            converged, status = client.wait_converged(stamp, timeout=60)
+            assert converged, status.values if status else None
+        else:
+            target = client.current_tool_pose()
+            target[2, 3] -= 0.05
+            stamp = client.send_line(target)
+            status = client.wait_line_done(stamp, timeout=60)
+            assert status.message == "holding" and status.values["target_stamp"] == stamp, status.values
+        resent = client.resent.get(stamp, 0)
+        assert 1 <= resent <= GOAL_RESENDS and len(published_at) == 1 + resent
+        assert published_at[1] - published_at[0] >= GOAL_RESEND_AFTER_S  # not before it was due
 
 
 @pytest.mark.parametrize("robot", ["genova7"])

@@ -57,6 +57,14 @@ def stamp_key(stamp: Time) -> str:
     return f"{stamp.sec}.{stamp.nanosec:09d}"
 
 
+def stamp_key_to_ns(key: str) -> int:
+    """The time [ns] of a :func:`stamp_key` text; ValueError for any other text."""
+    seconds, dot, nanoseconds = key.partition(".")
+    if not dot or len(nanoseconds) != 9:
+        raise ValueError(f"not a stamp key (sec.nanosec, 9 digits): {key!r}")
+    return int(seconds) * 1_000_000_000 + int(nanoseconds)
+
+
 # --- poses -----------------------------------------------------------------------------------
 
 

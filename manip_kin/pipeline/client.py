@@ -24,6 +24,11 @@ from manip_kin.errors import InvalidArgumentError
 from manip_kin.pipeline.domain import ensure_ros_isolation
 from manip_kin.pipeline.errors import PipelineError
 
+#: Seconds without its node reporting a goal or line target of ours after which it is sent again.
+GOAL_RESEND_AFTER_S = 1.0
+#: Times a goal or line target is sent again at most.
+GOAL_RESENDS = 3
+
 
 def normalize_namespace(namespace: str | None) -> str:
     """``"left"``, ``"/left/"`` → ``"/left"``; ``""``, ``"/"``, None → ``""`` (the root namespace).
@@ -133,6 +138,9 @@ class PipelineClient:
         self._executor.add_node(self.node)
         self._publishers: dict[str, object] = {}
         self._statuses: dict[str, Status] = {}
+        # Goals and line targets this client sent, by stamp key: (topic, message, send time).
+        self._sent: dict[str, tuple[str, object, float]] = {}
+        self.resent: dict[str, int] = {}  # stamp key: times sent again (see _resend_unreported)
         self.joint_state: JointState | None = None
         self.tool_pose: PoseStamped | None = None
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
@@ -293,7 +301,9 @@ class PipelineClient:
 
         msg = self.pose_msg(pose, frame_id)
         self.publish_delivered("goal_pose", msg, timeout)
-        return stamp_key(msg.header.stamp)
+        key = stamp_key(msg.header.stamp)
+        self._sent[key] = ("goal_pose", msg, time.monotonic())
+        return key
 
     def send_line(self, pose: np.ndarray, frame_id: str | None = None, timeout: float = 10.0) -> str:
         """Publish a line target on ``line_target``; returns its stamp key (see :meth:`wait_line_done`)."""
@@ -301,7 +311,9 @@ class PipelineClient:
 
         msg = self.pose_msg(pose, frame_id)
         self.publish_delivered("line_target", msg, timeout)
-        return stamp_key(msg.header.stamp)
+        key = stamp_key(msg.header.stamp)
+        self._sent[key] = ("line_target", msg, time.monotonic())
+        return key
 
     def send_joint_trajectory(self, msg, timeout: float = 10.0) -> str:
         """Stamp a ``JointTrajectory`` now and publish it on ``joint_trajectory``; returns its stamp key."""
@@ -378,12 +390,46 @@ class PipelineClient:
         def done():
             status = self._statuses.get(key)
             if status is None or status.values.get("goal_stamp") != goal_stamp:
+                self._resend_unreported(goal_stamp, status.values.get("goal_stamp", "") if status else "")
                 return False
             last[0] = status
             return status.message == "converged"
 
         converged = bool(self.spin_until(done, timeout))
         return converged, last[0]
+
+    def _resend_unreported(self, stamp: str, reported: str) -> None:
+        """Publish a goal or line target of ours again when its node has not reported it.
+
+        ``publish_delivered`` waits for the subscriber's acknowledgement, but a reliable
+        *volatile* reader that matches our writer after the sample went out acknowledges it
+        without having it (Fast DDS skips what a late joiner missed): the message is lost while
+        "delivered". Seen once under load (a CLI goal never reported in 30 s). The controller and
+        the generator report a new goal's or target's stamp at once, so one unreported for
+        ``GOAL_RESEND_AFTER_S`` is sent again (same stamp), at most ``GOAL_RESENDS`` times, and
+        never over a newer one the node reports.
+
+        Args:
+            stamp: stamp key of the message this client sent (others are left alone).
+            reported: stamp key the node reports for its current goal or target ('' for none).
+        """
+        from manip_kin.nodes.conversions import stamp_key_to_ns
+
+        sent = self._sent.get(stamp)
+        if sent is None or self.resent.get(stamp, 0) >= GOAL_RESENDS:
+            return
+        topic, msg, sent_at = sent
+        if time.monotonic() - sent_at < GOAL_RESEND_AFTER_S:
+            return
+        try:
+            superseded = bool(reported) and stamp_key_to_ns(reported) > stamp_key_to_ns(stamp)
+        except ValueError:  # not a stamp key: a node that is not ours
+            superseded = False
+        if superseded:
+            return  # the node has moved on to a newer one: ours is not wanted any more
+        self.publisher(type(msg), topic).publish(msg)
+        self._sent[stamp] = (topic, msg, time.monotonic())
+        self.resent[stamp] = self.resent.get(stamp, 0) + 1
 
     def wait_line_done(
         self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator"
@@ -403,11 +449,14 @@ class PipelineClient:
         def done():
             status = self._statuses.get(key)
             if status is None:
+                self._resend_unreported(target_stamp, "")
                 return None
             if status.values.get("rejected_stamp") == target_stamp:
                 return status
-            if status.values.get("target_stamp") == target_stamp and status.message == "holding":
-                return status
+            reported = status.values.get("target_stamp", "")
+            if reported == target_stamp:
+                return status if status.message == "holding" else None
+            self._resend_unreported(target_stamp, reported)
             return None
 
         status = self.spin_until(done, timeout)
