@@ -30,6 +30,17 @@ GOAL_RESEND_AFTER_S = 1.0
 GOAL_RESENDS = 3
 
 
+@dataclass
+class _SentTarget:
+    """A goal or line target a client sent: its stamp key, the message, when it last went out
+    (time.monotonic() [s]) and how many times it was sent again."""
+
+    stamp: str
+    msg: object
+    sent_at: float
+    resends: int = 0
+
+
 def normalize_namespace(namespace: str | None) -> str:
     """``"left"``, ``"/left/"`` → ``"/left"``; ``""``, ``"/"``, None → ``""`` (the root namespace).
 
@@ -138,9 +149,8 @@ class PipelineClient:
         self._executor.add_node(self.node)
         self._publishers: dict[str, object] = {}
         self._statuses: dict[str, Status] = {}
-        # Goals and line targets this client sent, by stamp key: (topic, message, send time).
-        self._sent: dict[str, tuple[str, object, float]] = {}
-        self.resent: dict[str, int] = {}  # stamp key: times sent again (see _resend_unreported)
+        # The newest goal and line target this client sent, by topic (see _resend_unreported).
+        self._newest_sent: dict[str, _SentTarget] = {}
         self.joint_state: JointState | None = None
         self.tool_pose: PoseStamped | None = None
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
@@ -297,23 +307,26 @@ class PipelineClient:
 
     def send_goal(self, pose: np.ndarray, frame_id: str | None = None, timeout: float = 10.0) -> str:
         """Publish a goal pose on ``goal_pose``; returns its stamp key (see :meth:`wait_converged`)."""
-        from manip_kin.nodes.conversions import stamp_key
-
-        msg = self.pose_msg(pose, frame_id)
-        self.publish_delivered("goal_pose", msg, timeout)
-        key = stamp_key(msg.header.stamp)
-        self._sent[key] = ("goal_pose", msg, time.monotonic())
-        return key
+        return self._send_pose_target("goal_pose", pose, frame_id, timeout)
 
     def send_line(self, pose: np.ndarray, frame_id: str | None = None, timeout: float = 10.0) -> str:
         """Publish a line target on ``line_target``; returns its stamp key (see :meth:`wait_line_done`)."""
+        return self._send_pose_target("line_target", pose, frame_id, timeout)
+
+    def _send_pose_target(self, topic: str, pose: np.ndarray, frame_id: str | None, timeout: float) -> str:
+        """Publish ``pose`` stamped now on ``topic`` once delivered; remembered as the newest
+        target of ``topic`` (see :meth:`_resend_unreported`); returns its stamp key."""
         from manip_kin.nodes.conversions import stamp_key
 
         msg = self.pose_msg(pose, frame_id)
-        self.publish_delivered("line_target", msg, timeout)
+        self.publish_delivered(topic, msg, timeout)
         key = stamp_key(msg.header.stamp)
-        self._sent[key] = ("line_target", msg, time.monotonic())
+        self._newest_sent[topic] = _SentTarget(key, msg, time.monotonic())
         return key
+
+    def resends(self, stamp: str) -> int:
+        """Times the newest goal or line target stamped ``stamp`` was sent again (0 if none)."""
+        return next((sent.resends for sent in self._newest_sent.values() if sent.stamp == stamp), 0)
 
     def send_joint_trajectory(self, msg, timeout: float = 10.0) -> str:
         """Stamp a ``JointTrajectory`` now and publish it on ``joint_trajectory``; returns its stamp key."""
@@ -390,7 +403,7 @@ class PipelineClient:
         def done():
             status = self._statuses.get(key)
             if status is None or status.values.get("goal_stamp") != goal_stamp:
-                self._resend_unreported(goal_stamp, status.values.get("goal_stamp", "") if status else "")
+                self._resend_unreported("goal_pose", goal_stamp, status.values.get("goal_stamp", "") if status else "")
                 return False
             last[0] = status
             return status.message == "converged"
@@ -398,7 +411,7 @@ class PipelineClient:
         converged = bool(self.spin_until(done, timeout))
         return converged, last[0]
 
-    def _resend_unreported(self, stamp: str, reported: str) -> None:
+    def _resend_unreported(self, topic: str, stamp: str, reported: str) -> None:
         """Publish a goal or line target of ours again when its node has not reported it.
 
         ``publish_delivered`` waits for the subscriber's acknowledgement, but a reliable
@@ -410,16 +423,17 @@ class PipelineClient:
         never over a newer one the node reports.
 
         Args:
-            stamp: stamp key of the message this client sent (others are left alone).
+            topic: ``goal_pose`` or ``line_target``.
+            stamp: stamp key of the target waited for: re-sent only if it is the newest this
+                client sent on ``topic``.
             reported: stamp key the node reports for its current goal or target ('' for none).
         """
         from manip_kin.nodes.conversions import stamp_key_to_ns
 
-        sent = self._sent.get(stamp)
-        if sent is None or self.resent.get(stamp, 0) >= GOAL_RESENDS:
+        sent = self._newest_sent.get(topic)
+        if sent is None or sent.stamp != stamp or sent.resends >= GOAL_RESENDS:
             return
-        topic, msg, sent_at = sent
-        if time.monotonic() - sent_at < GOAL_RESEND_AFTER_S:
+        if time.monotonic() - sent.sent_at < GOAL_RESEND_AFTER_S:
             return
         try:
             superseded = bool(reported) and stamp_key_to_ns(reported) > stamp_key_to_ns(stamp)
@@ -427,9 +441,9 @@ class PipelineClient:
             superseded = False
         if superseded:
             return  # the node has moved on to a newer one: ours is not wanted any more
-        self.publisher(type(msg), topic).publish(msg)
-        self._sent[stamp] = (topic, msg, time.monotonic())
-        self.resent[stamp] = self.resent.get(stamp, 0) + 1
+        self.publisher(type(sent.msg), topic).publish(sent.msg)
+        sent.sent_at = time.monotonic()
+        sent.resends += 1
 
     def wait_line_done(
         self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator"
@@ -449,14 +463,14 @@ class PipelineClient:
         def done():
             status = self._statuses.get(key)
             if status is None:
-                self._resend_unreported(target_stamp, "")
+                self._resend_unreported("line_target", target_stamp, "")
                 return None
             if status.values.get("rejected_stamp") == target_stamp:
                 return status
             reported = status.values.get("target_stamp", "")
             if reported == target_stamp:
                 return status if status.message == "holding" else None
-            self._resend_unreported(target_stamp, reported)
+            self._resend_unreported("line_target", target_stamp, reported)
             return None
 
         status = self.spin_until(done, timeout)
