@@ -72,9 +72,29 @@ def predict_positions(q, qdot, horizon: float, lower, upper) -> np.ndarray:
         ``q + qdot·horizon``, shape (n,), stopped at a limit it would cross; a joint already
         outside its limits (a reported state may be, by a margin) is not moved onto them.
     """
-    q = np.asarray(q, dtype=float)
-    predicted = q + np.asarray(qdot, dtype=float) * horizon
-    return np.minimum(np.maximum(predicted, np.minimum(lower, q)), np.maximum(upper, q))
+    return np.array(_predicted(_floats(q), _floats(qdot), horizon, _floats(lower), _floats(upper)))
+
+
+def _floats(values) -> list:
+    """A vector as a list of Python floats (the per-cycle path computes on plain floats: for a
+    handful of joints, numpy's per-call overhead costs more than the arithmetic)."""
+    if type(values) is np.ndarray:
+        return values.tolist()
+    return values if type(values) is list else [float(v) for v in values]
+
+
+def _predicted(q: list, qdot: list, horizon: float, lower: list, upper: list) -> list:
+    """:func:`predict_positions` on lists of floats."""
+    predicted = []
+    for position, rate, low, high in zip(q, qdot, lower, upper):
+        value = position + rate * horizon
+        # clamp to [min(low, position), max(high, position)]
+        if value > high:
+            value = high if position <= high else min(value, position)
+        elif value < low:
+            value = low if position >= low else max(value, position)
+        predicted.append(value)
+    return predicted
 
 
 def state_for_command(
@@ -98,7 +118,9 @@ def state_for_command(
     """
     if qdot is None or not -period <= state_age <= MAX_STATE_AGE_PERIODS * period:
         return q
-    # One comparison accepts plausible velocities; it is False for NaN too.
-    if not np.less_equal(np.abs(qdot), max_rate).all():
-        return q
-    return predict_positions(q, qdot, command_horizon(state_age, period, command_latency), lower, upper)
+    rates = _floats(qdot)
+    for rate, limit in zip(rates, _floats(max_rate)):
+        if not abs(rate) <= limit:  # False for NaN too
+            return q
+    horizon = command_horizon(state_age, period, command_latency)
+    return np.array(_predicted(_floats(q), rates, horizon, _floats(lower), _floats(upper)))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -69,12 +70,12 @@ class Task:
         """Number of task components m."""
         return len(self.rows)
 
-    @property
+    @cached_property
     def orientation_rows(self) -> tuple[int, ...]:
         """The task's rotation components (indices 0..2)."""
         return tuple(r for r in self.rows if r < 3)
 
-    @property
+    @cached_property
     def position_rows(self) -> tuple[int, ...]:
         """The task's position components (indices 3..5)."""
         return tuple(r for r in self.rows if r >= 3)
@@ -85,10 +86,19 @@ class Task:
         return self.rows == tuple(range(self.rows[0], self.rows[-1] + 1))
 
     def error_norms(self, orientation_error: Sequence[float], position_error: Sequence[float]) -> tuple[float, float]:
-        """Norms of the task's orientation [rad] and position [m] components of an error."""
-        orientation = sum(float(orientation_error[r]) ** 2 for r in self.orientation_rows) ** 0.5
-        position = sum(float(position_error[r - 3]) ** 2 for r in self.position_rows) ** 0.5
-        return orientation, position
+        """Norms of the task's orientation [rad] and position [m] components of an error.
+
+        Runs every control cycle: plain floats and loops (indexing a numpy array element by
+        element costs more than the arithmetic).
+        """
+        orientation = orientation_error.tolist() if type(orientation_error) is np.ndarray else orientation_error
+        position = position_error.tolist() if type(position_error) is np.ndarray else position_error
+        orientation_squares = position_squares = 0.0
+        for r in self.orientation_rows:
+            orientation_squares += float(orientation[r]) ** 2
+        for r in self.position_rows:
+            position_squares += float(position[r - 3]) ** 2
+        return orientation_squares**0.5, position_squares**0.5
 
 
 FULL_TASK = Task(NAMED_TASKS["full"])

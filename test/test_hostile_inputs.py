@@ -161,14 +161,18 @@ def test_joint_state_handlers(names, positions, model_order):
     msg.position = [float(v) for v in positions]
     mapper = conv.JointStateMapper(NAMES, BOUNDS.position_lower, BOUNDS.position_upper)
     decoder = conv.JointStateDecoder(NAMES, BOUNDS.position_lower, BOUNDS.position_upper)
+    # A decoder that has learned the model-order layout reads such messages on its fast path.
+    learned = conv.JointStateDecoder(NAMES, BOUNDS.position_lower, BOUNDS.position_upper)
+    learned.positions(serialize_message(conv.make_joint_state(NAMES, Q0)))
     data = serialize_message(msg)
     results = []
-    for read in (lambda: mapper.positions(msg), lambda: decoder.positions(data), lambda: decoder.positions(data)):
+    reads = (mapper.positions, decoder.positions, decoder.positions, learned.positions)
+    for read, argument in zip(reads, (msg, data, data, data)):
         try:
-            results.append(read())
+            results.append(read(argument))
         except conv.InvalidMessageError as error:
             results.append(str(error))
-    # The message path and the byte path (first and learned fast path) agree.
+    # The message path and the byte paths (first read, then learned fast paths) agree.
     assert all(type(r) is type(results[0]) for r in results)
     if isinstance(results[0], str):
         assert "valid" in results[0]

@@ -56,6 +56,24 @@ def test_prediction_stops_at_limits_and_leaves_an_outside_joint_where_it_is():
     )
 
 
+finite = st.floats(-4.0, 4.0, allow_nan=False)
+
+
+@settings(max_examples=300)
+@given(
+    st.lists(st.tuples(finite, finite, st.floats(-1.0, 0.0), st.floats(0.0, 1.0)), min_size=1, max_size=8),
+    st.floats(0.0, 0.05),
+)
+def test_prediction_is_clamped_into_the_limits_widened_to_the_reported_position(joints, horizon):
+    """Each joint ends in [min(lower, q), max(upper, q)]: stopped on a limit it would cross from
+    inside, never moved outward by a limit it is already beyond (both sides, both directions)."""
+    q, qdot, lower, upper = (np.array(column) for column in zip(*joints))
+    expected = np.clip(q + qdot * horizon, np.minimum(lower, q), np.maximum(upper, q))
+    np.testing.assert_array_equal(predict_positions(q, qdot, horizon, lower, upper), expected)
+    # Lists of floats (what the controller passes for the limits) give the same answer.
+    np.testing.assert_array_equal(predict_positions(q, qdot, horizon, list(lower), list(upper)), expected)
+
+
 def test_state_is_used_as_reported_without_plausible_velocities_or_age():
     q = np.array([0.1, 0.2])
     qdot = np.array([0.5, -0.5])

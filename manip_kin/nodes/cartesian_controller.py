@@ -76,7 +76,12 @@ class CartesianControllerNode(LoopingNode):
         self.q: np.ndarray | None = None
         self._state_velocities: np.ndarray | None = None
         self._state_stamp_ns = 0
-        self._plausible_rates = PLAUSIBLE_RATE_FACTOR * self.model.velocity_limits
+        # As lists: state_for_command computes on plain floats every cycle.
+        self._prediction_bounds = (
+            self.model.lower.tolist(),
+            self.model.upper.tolist(),
+            (PLAUSIBLE_RATE_FACTOR * self.model.velocity_limits).tolist(),
+        )
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
@@ -249,9 +254,7 @@ class CartesianControllerNode(LoopingNode):
             (now_ns - self._state_stamp_ns) * 1e-9,
             self.dt,
             self.command_latency,
-            self.model.lower,
-            self.model.upper,
-            self._plausible_rates,
+            *self._prediction_bounds,
         )
 
     def _cycle(self, now_ns: int) -> None:
