@@ -50,3 +50,12 @@ def realtime_scheduling_error(priority: int = 10) -> str:
     thread.start()
     thread.join()
     return outcome[0]
+
+
+def thread_slice_ns(native_id: int) -> int | None:
+    """A thread of this process's EEVDF slice as the kernel reports it (``se.slice`` in /proc,
+    ns), or None where the kernel reports none."""
+    for line in open(f"/proc/self/task/{native_id}/sched"):
+        if line.startswith("se.slice"):
+            return int(line.split(":")[1])
+    return None

@@ -368,6 +368,29 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
     assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
 
 
+def test_scheduler_slice_parameter_reaches_the_loop_thread_and_its_status(harness):
+    """scheduler_slice 0.0005 s (default 0.0001): the loop thread's slice as the kernel reports
+    it, and ``loop_scheduling`` in the status; a kernel without per-thread slices says why."""
+    from pipeline_checks import thread_slice_ns
+
+    node, commands, diagnostics = _start(harness, scheduler_slice=0.0005)
+    assert harness.spin_until(lambda: node.loop.stats().cycles > 5, 5)
+    if node.loop.scheduler_slice_error:
+        assert "scheduler slice 0.5 ms not set" in node.loop.scheduler_slice_error
+        expected = "default"
+        print(f"this kernel refused the slice: {node.loop.scheduler_slice_error}")
+    else:
+        assert thread_slice_ns(node.loop._thread.native_id) in (500_000, None)
+        expected = "slice 0.5 ms"
+
+    def scheduling_reported():
+        values = [dict((kv.key, kv.value) for kv in s.values) for s in statuses(diagnostics, "cartesian_controller")]
+        return any(v.get("loop_scheduling") == expected for v in values)
+
+    assert harness.spin_until(scheduling_reported, 5)
+    assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
+
+
 def test_diagnostics_rate_parameter(harness):
     """diagnostics_rate_hz 2 (default 10): in a steady state statuses come 0.5 s apart, never closer."""
     node, _, diagnostics = _start(harness, diagnostics_rate_hz=2.0)

@@ -100,7 +100,9 @@ class CartesianControllerNode(LoopingNode):
             f"goals in frame {self.base_frame!r}, task {self.controller.task.name}"
         )
         # A new goal runs a cycle at once instead of waiting for the next tick.
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], wake_on=(self._goal_sub,))
+        self.start_loop(
+            self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"], wake_on=(self._goal_sub,)
+        )
 
     @property
     def state(self) -> ControllerState:

@@ -5,7 +5,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 
 from __future__ import annotations
 
-from manip_kin.nodes.params import REALTIME_PRIORITY, ParamSpec, usage_text
+from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import ControllerState
 
@@ -145,6 +145,7 @@ PARAMETERS = (
         tunable=True,
     ),
     REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
 )
 
 USAGE = usage_text(

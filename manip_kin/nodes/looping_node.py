@@ -51,6 +51,7 @@ class LoopingNode(Node):
         rate_hz: float,
         cycle: Callable[[int], None],
         realtime_priority: int = 0,
+        scheduler_slice: float = 0.0,
         wake_on: tuple[PolledSubscription, ...] = (),
     ) -> None:
         """Start ``cycle(now_ns)`` at ``rate_hz`` [Hz] in the loop thread.
@@ -59,6 +60,8 @@ class LoopingNode(Node):
             rate_hz: cycle rate [Hz].
             cycle: the work of one cycle.
             realtime_priority: SCHED_FIFO priority of the loop thread (0: normal).
+            scheduler_slice: under normal scheduling, the loop thread's time slice [s] (0: the
+                kernel's default; see :func:`manip_kin.nodes.rate_loop.set_scheduler_slice`).
             wake_on: subscriptions whose messages run a cycle at once (a new goal) instead of
                 waiting for the next tick.
         """
@@ -76,6 +79,7 @@ class LoopingNode(Node):
             self._on_loop_error,
             name=self.get_name(),
             realtime_priority=realtime_priority,
+            scheduler_slice_ns=int(round(scheduler_slice * 1e9)),
             wait=self.waiter.wait if self.waiter is not None else None,
             on_fatal=self._on_loop_gave_up,
             give_up_after=self.GIVE_UP_AFTER_S,
@@ -83,9 +87,13 @@ class LoopingNode(Node):
         problem = fast_path_problem()
         if problem:
             self.get_logger().info(f"inputs read through the public rclpy API (more CPU): {problem}")
-        if self.loop.realtime_priority:
-            self.get_logger().info(f"loop thread at SCHED_FIFO priority {self.loop.realtime_priority}")
         self.loop.start()
+        # The thread sets its own scheduling: say what it got (or why not) once it has.
+        self.loop.configured.wait(1.0)
+        for problem in (self.loop.realtime_error, self.loop.scheduler_slice_error):
+            if problem:
+                self.get_logger().warning(f"loop thread: {problem}")
+        self.get_logger().info(f"loop at {rate_hz:g} Hz, thread scheduling: {self.loop.scheduling or 'unknown'}")
 
     # --- what subclasses provide ---------------------------------------------------------------
 

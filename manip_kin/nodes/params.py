@@ -169,6 +169,18 @@ REALTIME_PRIORITY = ParamSpec(
     minimum=0,
 )
 
+#: Under normal scheduling, the loop thread's EEVDF slice (see rate_loop.set_scheduler_slice).
+SCHEDULER_SLICE = ParamSpec(
+    "scheduler_slice",
+    "float",
+    0.0001,
+    "time slice the loop thread asks the kernel for under normal scheduling: a short one lets it "
+    "preempt other threads when its period comes (Linux 6.12+, no privilege; the kernel keeps it "
+    "within 0.0001-0.1; 0 = the kernel's default)",
+    "s",
+    minimum=0.0,
+)
+
 
 def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, object]:
     """Declare every parameter on ``node`` and return the checked values by name.

@@ -33,6 +33,7 @@ Design notes:
 from __future__ import annotations
 
 import os
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -71,6 +72,7 @@ class LoopStats:
         samples: number of periods in the window.
         woken: cycles run early because a message woke the loop (their periods are not in
             the window statistics: they are reactions, not schedule).
+        scheduling: how the kernel schedules the loop thread (:attr:`RateLoop.scheduling`).
     """
 
     target_rate_hz: float
@@ -84,6 +86,7 @@ class LoopStats:
     errors: int
     samples: int
     woken: int = 0
+    scheduling: str = ""
 
 
 #: Timer slack of a loop thread [ns]. Linux lets a sleeping thread wake up to its slack
@@ -104,6 +107,53 @@ def set_timer_slack(slack_ns: int) -> bool:
         return False
 
 
+# sched_setattr / sched_getattr system call numbers (no libc wrapper, none in os).
+_SCHED_ATTR_SYSCALLS = {"x86_64": (314, 315), "aarch64": (274, 275)}
+_SCHED_ATTR = struct.Struct("<IIQiIQQQII")  # struct sched_attr, SCHED_ATTR_SIZE_VER1 (56 bytes)
+
+
+def set_scheduler_slice(slice_ns: int) -> tuple[int, str]:
+    """Ask the kernel for an EEVDF time slice of ``slice_ns`` for the calling thread.
+
+    Under the normal scheduler (SCHED_OTHER) of Linux >= 6.12, a thread may request its own
+    slice (``sched_runtime`` of ``sched_setattr``; no privilege needed, bounded by the kernel to
+    0.1-100 ms). A short slice gives the thread an early virtual deadline when it wakes, so it
+    preempts a thread running a longer slice instead of queueing behind it: a 1 kHz loop then
+    starts on time although other processes keep both cores busy. Its share of CPU is not
+    changed. Policy and nice value are kept.
+
+    Returns:
+        ``(slice_ns, "")``: the slice the kernel now gives the thread (read back), or ``(0, why
+        not)`` (another architecture, a kernel without per-thread slices, a real-time policy).
+    """
+    import ctypes
+
+    numbers = _SCHED_ATTR_SYSCALLS.get(os.uname().machine)
+    if numbers is None:
+        return 0, f"sched_setattr not wired for {os.uname().machine}"
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        buffer = ctypes.create_string_buffer(_SCHED_ATTR.size)
+        if libc.syscall(numbers[1], 0, buffer, _SCHED_ATTR.size, 0) != 0:
+            return 0, f"sched_getattr failed: {os.strerror(ctypes.get_errno())}"
+        fields = list(_SCHED_ATTR.unpack(buffer.raw))
+        if fields[1] != os.SCHED_OTHER:
+            return 0, f"the thread's policy is {fields[1]}, not SCHED_OTHER"
+        fields[0], fields[2], fields[5] = _SCHED_ATTR.size, 0, int(slice_ns)  # size, flags, runtime
+        buffer = ctypes.create_string_buffer(_SCHED_ATTR.pack(*fields), _SCHED_ATTR.size)
+        if libc.syscall(numbers[0], 0, buffer, 0) != 0:
+            return 0, f"sched_setattr failed: {os.strerror(ctypes.get_errno())}"
+        buffer = ctypes.create_string_buffer(_SCHED_ATTR.size)
+        if libc.syscall(numbers[1], 0, buffer, _SCHED_ATTR.size, 0) != 0:
+            return 0, f"sched_getattr failed: {os.strerror(ctypes.get_errno())}"
+    except (OSError, AttributeError) as error:
+        return 0, f"sched_setattr not available: {error}"
+    granted = _SCHED_ATTR.unpack(buffer.raw)[5]
+    if not granted:
+        return 0, "this kernel has no per-thread slices (Linux 6.12 or later)"
+    return granted, ""
+
+
 class RateLoop:
     """Calls ``cycle(now_ns)`` every ``1 / rate_hz`` seconds in a dedicated thread.
 
@@ -116,6 +166,8 @@ class RateLoop:
         realtime_priority: SCHED_FIFO priority (1..99) of the loop thread, or 0 for normal
             scheduling. Needs CAP_SYS_NICE (root); without it the loop runs normally and
             :attr:`realtime_error` says why.
+        scheduler_slice_ns: under normal scheduling, the EEVDF slice to request for the loop
+            thread [ns] (see :func:`set_scheduler_slice`), or 0 for the kernel's default.
         wait: ``wait(timeout_ns) -> bool`` blocks until the next deadline and returns True
             when it returned early because the cycle should run now (default: sleep).
         on_fatal: called with the reason when the loop gives up (see ``give_up_after``).
@@ -139,6 +191,7 @@ class RateLoop:
         on_fatal: Callable[[str], None] | None = None,
         give_up_after: float = 10.0,
         min_rate_fraction: float = 0.25,
+        scheduler_slice_ns: int = 0,
     ):
         if not 0 < rate_hz < 1e6:
             raise ValueError(f"rate_hz = {rate_hz}; valid: > 0 and < 1e6")
@@ -164,6 +217,13 @@ class RateLoop:
         self._thread: threading.Thread | None = None
         self.realtime_priority = int(realtime_priority)
         self.realtime_error = ""
+        self.scheduler_slice_ns = int(scheduler_slice_ns)
+        #: Why the requested slice was not applied ("" when it was, or none was asked for).
+        self.scheduler_slice_error = ""
+        #: How the loop thread is scheduled once it runs: ``SCHED_FIFO 10``, ``slice 0.1 ms``,
+        #: ``default`` (set by the thread itself; ``configured`` is set then).
+        self.scheduling = ""
+        self.configured = threading.Event()
 
     def start(self) -> None:
         """Start the loop thread (idempotent)."""
@@ -183,15 +243,28 @@ class RateLoop:
         return self._thread is not None and self._thread.is_alive()
 
     def _configure_thread(self) -> None:
-        """Timer slack and, when asked for, SCHED_FIFO priority of the loop thread (it calls this)."""
-        set_timer_slack(TIMER_SLACK_NS)
-        if self.realtime_priority <= 0:
-            return
+        """Timer slack, SCHED_FIFO priority or else the EEVDF slice of the loop thread (it calls
+        this; each applies to the calling thread only: the executor thread keeps its scheduling)."""
         try:
-            # Applies to the calling thread only (Linux): the executor thread keeps its priority.
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
-        except (OSError, AttributeError) as error:
-            self.realtime_error = f"SCHED_FIFO priority {self.realtime_priority} not set: {error}"
+            set_timer_slack(TIMER_SLACK_NS)
+            if self.realtime_priority > 0:
+                try:
+                    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
+                    self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+                    return
+                except (OSError, AttributeError) as error:
+                    self.realtime_error = f"SCHED_FIFO priority {self.realtime_priority} not set: {error}"
+            self.scheduling = "default"
+            if self.scheduler_slice_ns > 0:
+                granted, why_not = set_scheduler_slice(self.scheduler_slice_ns)
+                if granted:
+                    self.scheduling = f"slice {granted * 1e-6:g} ms"
+                else:
+                    self.scheduler_slice_error = (
+                        f"scheduler slice {self.scheduler_slice_ns * 1e-6:g} ms not set: {why_not}"
+                    )
+        finally:
+            self.configured.set()
 
     def _run(self) -> None:
         self._configure_thread()
@@ -294,7 +367,9 @@ class RateLoop:
         """Summary of the last ``window`` cycles."""
         count = min(self._count, self._periods_ns.shape[0])
         if count == 0:
-            return LoopStats(self.rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self._overruns, self._errors, 0, self._woken)
+            return LoopStats(
+                self.rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self._overruns, self._errors, 0, self._woken, self.scheduling
+            )
         periods = self._periods_ns[:count].astype(float)
         compute = self._compute_ns[:count].astype(float)
         error = np.abs(periods - self.period_ns)
@@ -312,6 +387,7 @@ class RateLoop:
             errors=self._errors,
             samples=count,
             woken=self._woken,
+            scheduling=self.scheduling,
         )
 
 
@@ -328,6 +404,7 @@ def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
         ("loop_overruns", str(stats.overruns)),
         ("loop_errors", str(stats.errors)),
         ("loop_woken", str(stats.woken)),
+        ("loop_scheduling", stats.scheduling),
     ]
 
 

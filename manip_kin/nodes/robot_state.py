@@ -25,7 +25,14 @@ from manip_kin.joint_integration import integrate_joint_rates
 from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.params import REALTIME_PRIORITY, LiveParameters, ParamSpec, declare_parameters, usage_text
+from manip_kin.nodes.params import (
+    REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
+    LiveParameters,
+    ParamSpec,
+    declare_parameters,
+    usage_text,
+)
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
@@ -77,6 +84,7 @@ PARAMETERS = (
     ParamSpec("markers_rate_hz", "float", 10.0, "rate of the markers topic (0: off)", "Hz", minimum=0.0),
     ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", positive=True),
     REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
 )
 
 USAGE = usage_text(
@@ -282,7 +290,7 @@ class RobotStateNode(LoopingNode):
             f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, "
             f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
         )
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"])
+        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"])
 
     def _set_parameters(self, params: dict) -> None:
         """The tunable parameters in ``params`` (at start, and on a live change: the next cycle uses them)."""

@@ -99,7 +99,13 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"{self.limits.max_angular_velocity:g} rad/s (task {self.task.name}), {self.joint_time_scaling} "
             f"joint trajectories, streamed at {self.rate_hz:g} Hz"
         )
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], wake_on=(self._target_sub,))
+        self.start_loop(
+            self.rate_hz,
+            self._cycle,
+            params["realtime_priority"],
+            params["scheduler_slice"],
+            wake_on=(self._target_sub,),
+        )
 
     @property
     def state(self) -> GeneratorState:

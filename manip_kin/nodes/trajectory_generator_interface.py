@@ -6,7 +6,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 from __future__ import annotations
 
 from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS
-from manip_kin.nodes.params import REALTIME_PRIORITY, ParamSpec, usage_text
+from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import GeneratorState
 from manip_kin.trajectory import TIME_SCALINGS
@@ -105,6 +105,7 @@ PARAMETERS = (
         tunable=True,
     ),
     REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
 )
 
 USAGE = usage_text(
