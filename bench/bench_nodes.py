@@ -51,17 +51,23 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _loop_rows(rate_hz: float, priority: int, window: float = 4.0) -> list[dict]:
+def _loop_rows(rate_hz: float, priority: int, window: float = 4.0, kernel_default_slice: bool = False) -> list[dict]:
+    """Loop, CPU and (at 1 kHz) latency rows of one pipeline. ``kernel_default_slice``: the nodes
+    run with ``scheduler_slice`` 0 (what a loop thread gets without asking), loop rows only."""
     from manip_kin.pipeline import Pipeline, pipeline_processes
     from manip_kin.rotations import make_transform, rpy_to_matrix
 
     goal = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
     label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
+    extra = {}
+    if kernel_default_slice:
+        label += ", the kernel's default slice"
+        extra = {"scheduler_slice": 0.0}
     rows = []
-    with Pipeline(
-        pipeline_processes("genova7", rate_hz=rate_hz, realtime_priority=priority),
-        log_dir=tempfile.mkdtemp(prefix="bench_nodes_"),
-    ) as pipeline:
+    processes = pipeline_processes(
+        "genova7", rate_hz=rate_hz, realtime_priority=priority, controller=extra, generator=extra, robot_state=extra
+    )
+    with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_nodes_")) as pipeline:
         client = pipeline.client()
         client.spin_for(1.0)
         client.send_goal(goal)
@@ -80,13 +86,14 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0) -> list[dict]
                     p99_period_error_ms=status.number("loop_period_error_p99_ms"),
                     max_period_error_ms=status.number("loop_period_error_max_ms"),
                     compute_mean_ms=status.number("loop_compute_mean_ms"),
+                    scheduling=status.values.get("loop_scheduling", ""),
                 )
             row["target"] = (
                 f"{TARGETS['rate']}; {TARGETS['cpu']}" if name != "trajectory_generator" else "(idle while no line)"
             )
             row["reference"] = REFERENCE
             rows.append(row)
-        if rate_hz >= 1000:
+        if rate_hz >= 1000 and not kernel_default_slice:
             # The floor under the latency, measured while the same nodes load the machine.
             rows.append(_round_trip_row(label=f"beside the pipeline at {label}"))
             rows.append(_latency_row(pipeline, label, priority))
@@ -365,6 +372,9 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
     for priority in priorities:
         for rate_hz in (500.0, 1000.0):
             rows += _loop_rows(rate_hz, priority)
+        if not priority:
+            # What the slice buys: the same 1 kHz loops on the kernel's default slice.
+            rows += _loop_rows(1000.0, 0, kernel_default_slice=True)
         rows.append(_line_row(1000.0, priority))
         rows += _two_pipeline_rows(500.0, priority)
     return rows
