@@ -295,3 +295,62 @@ def test_encode_values_paths_match_array_paths():
     assert joints.encode_values(5, [1.0, 2.0], [3.0, 4.0]) == joints.encode(
         5, np.array([1.0, 2.0]), np.array([3.0, 4.0])
     )
+
+
+def _pose_stamped_fields(msg) -> tuple:
+    """Every field of a PoseStamped (rclpy's or decoded), floats as their bit patterns (NaN == NaN)."""
+    p, o = msg.pose.position, msg.pose.orientation
+    floats = np.array([p.x, p.y, p.z, o.x, o.y, o.z, o.w]).view(np.int64).tolist()
+    return msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, floats
+
+
+any_float = st.floats(allow_nan=True, allow_infinity=True)
+
+
+@given(
+    st.integers(-(2**31), 2**31 - 1),
+    st.integers(0, 2**32 - 1),
+    st.text(st.characters(blacklist_characters="\0"), max_size=40),
+    st.lists(any_float, min_size=7, max_size=7),
+)
+def test_pose_stamped_read_from_its_bytes_equals_rclpy_deserialization(sec, nanosec, frame_id, values):
+    msg = PoseStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = sec, nanosec, frame_id
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z, o.x, o.y, o.z, o.w = values
+    data = serialize_message(msg)
+    decoded = conv.decode_pose_stamped(data)
+    assert isinstance(decoded, conv.DecodedPoseStamped)  # the fast path, not the fallback
+    assert _pose_stamped_fields(decoded) == _pose_stamped_fields(deserialize_message(data, PoseStamped))
+    # What the controller does with a goal reads it the same way.
+    assert conv.pose_problem(decoded, "base_link") == conv.pose_problem(msg, "base_link")
+    assert conv.stamp_key(decoded.header.stamp) == conv.stamp_key(msg.header.stamp)
+    if conv.pose_problem(msg, frame_id) is None:
+        np.testing.assert_array_equal(conv.pose_stamped_to_matrix(decoded), conv.pose_stamped_to_matrix(msg))
+
+
+@given(st.binary(max_size=120), st.integers(0, 120), st.booleans())
+def test_pose_stamped_bytes_cut_or_corrupted_decode_as_rclpy_does_or_are_rejected(noise, cut, splice):
+    msg = conv.make_pose_stamped(make_transform(rpy_to_matrix(0.1, 0.2, 0.3), [0.4, 0.5, 0.6]), "base_link")
+    valid = serialize_message(msg)
+    data = valid[:cut] + noise if splice else (valid[:cut] + noise + valid[cut:])[: len(valid) + 8]
+    try:
+        expected = _pose_stamped_fields(deserialize_message(data, PoseStamped))
+    except Exception:  # noqa: BLE001 - whatever rclpy raises for bytes it cannot read
+        expected = None
+    try:
+        got = _pose_stamped_fields(conv.decode_pose_stamped(data))
+    except conv.InvalidMessageError as error:
+        assert expected is None, (data, expected)
+        assert "goal pose bytes cannot be decoded" in str(error)
+        return
+    assert got == expected
+
+
+def test_pose_stamped_with_a_frame_id_that_is_not_utf8_decodes_as_rclpy_does():
+    data = bytearray(serialize_message(conv.make_pose_stamped(np.eye(4), "ab")))
+    assert data[16:19] == b"ab\0"
+    data[16:18] = b"\xff\xfe"
+    decoded = conv.decode_pose_stamped(bytes(data))
+    assert _pose_stamped_fields(decoded) == _pose_stamped_fields(deserialize_message(bytes(data), PoseStamped))
+    assert "base_link" in conv.pose_problem(decoded, "base_link")  # a wrong frame, said as for any other

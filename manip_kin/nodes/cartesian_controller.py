@@ -189,10 +189,14 @@ class CartesianControllerNode(LoopingNode):
                     f"rejected {self._joint_state_sub.subscription.topic_name}: {error}",
                 )
         pose_stamp = reference_stamp = None
-        while (msg := self._goal_sub.take()) is not None:
-            problem = conv.pose_problem(
-                msg, self.base_frame, "goal pose", self._quaternion_tolerance, self.bounds.max_target_distance
-            )
+        while (data := self._goal_sub.take(raw=True)) is not None:
+            try:
+                msg = conv.decode_pose_stamped(data, "goal pose")  # a goal wakes the loop: read it fast
+                problem = conv.pose_problem(
+                    msg, self.base_frame, "goal pose", self._quaternion_tolerance, self.bounds.max_target_distance
+                )
+            except conv.InvalidMessageError as error:
+                problem = str(error)
             if problem is not None:
                 self.rejected_goals += 1
                 self._warn(

@@ -300,6 +300,76 @@ class JointStateDecoder:
         self._velocity_values_at = 4 + _align(velocity_count_offset + 4, 8)
 
 
+class _Time(NamedTuple):
+    sec: int
+    nanosec: int
+
+
+class _Header(NamedTuple):
+    stamp: _Time
+    frame_id: str
+
+
+class _Point(NamedTuple):
+    x: float
+    y: float
+    z: float
+
+
+class _Quaternion(NamedTuple):
+    x: float
+    y: float
+    z: float
+    w: float
+
+
+class _Pose(NamedTuple):
+    position: _Point
+    orientation: _Quaternion
+
+
+class DecodedPoseStamped(NamedTuple):
+    """A ``PoseStamped`` read straight from its bytes, with the message's attribute paths
+    (``header.stamp.sec``, ``header.frame_id``, ``pose.position.x``, ``pose.orientation.w``...)
+    so that the checks and conversions of a message apply to it unchanged."""
+
+    header: _Header
+    pose: _Pose
+
+
+_STAMP_AND_STRING_LENGTH = struct.Struct("<iII")  # header.stamp, then the frame id's length
+_POSE_VALUES = struct.Struct("<7d")  # position x y z, orientation x y z w
+
+
+def decode_pose_stamped(data: bytes, what: str = "goal pose"):
+    """The ``PoseStamped`` of CDR bytes (``take(raw=True)``), without building the rclpy message.
+
+    A goal wakes the controller's loop, and rclpy's conversion of the bytes into a Python
+    ``PoseStamped`` (six message objects, each field set through a checked property) was the
+    largest part of the woken cycle (~0.1 ms of a ~0.25 ms reaction at 1 kHz). Well-formed
+    bytes are read with two ``struct`` unpacks into a :class:`DecodedPoseStamped`; anything
+    else goes through ``deserialize_message`` (the rclpy message, or
+    :class:`InvalidMessageError` naming ``what`` for bytes that do not decode).
+    """
+    if len(data) >= 16 and data[:4] == _CDR_LE:
+        sec, nanosec, length = _STAMP_AND_STRING_LENGTH.unpack_from(data, 4)
+        values_at = 4 + _align(12 + length, 8)
+        # A CDR string: its length counts the terminating NUL, which must be there.
+        if length >= 1 and len(data) >= values_at + _POSE_VALUES.size and data[16 + length - 1] == 0:
+            try:
+                frame_id = data[16 : 16 + length - 1].decode()
+            except UnicodeDecodeError:
+                frame_id = "\0"  # not ours to judge: deserialize_message says what it makes of it
+            if "\0" not in frame_id:
+                x, y, z, qx, qy, qz, qw = _POSE_VALUES.unpack_from(data, values_at)
+                return DecodedPoseStamped(
+                    _Header(_Time(sec, nanosec), frame_id), _Pose(_Point(x, y, z), _Quaternion(qx, qy, qz, qw))
+                )
+    from geometry_msgs.msg import PoseStamped
+
+    return _deserialize(data, PoseStamped, what)
+
+
 def decode_float64_array(data: bytes) -> np.ndarray:
     """The ``data`` of serialised ``Float64MultiArray`` bytes as a float64 vector (a copy)."""
     dimensions = struct.unpack_from("<I", data, 4)[0] if len(data) >= 8 else 1

@@ -10,12 +10,14 @@ working; new code may import from the job modules directly.
 """
 
 from manip_kin.nodes.cdr import (
+    DecodedPoseStamped,
     Float64ArrayCdr,
     JointStateCdr,
     JointStateDecoder,
     PoseStampedCdr,
     TwistStampedCdr,
     decode_float64_array,
+    decode_pose_stamped,
     quaternion_of_pose_values,
 )
 from manip_kin.nodes.diagnostics import (
@@ -60,6 +62,7 @@ from manip_kin.nodes.validation import (
 
 __all__ = [
     "DIAGNOSTIC_LEVELS",
+    "DecodedPoseStamped",
     "QUATERNION_TOLERANCE",
     "Float64ArrayCdr",
     "InvalidMessageError",
@@ -73,6 +76,7 @@ __all__ = [
     "check_pose_stamped",
     "command_problem",
     "decode_float64_array",
+    "decode_pose_stamped",
     "diagnostic_values",
     "fill_joint_state",
     "fill_pose",
