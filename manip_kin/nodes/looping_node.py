@@ -88,11 +88,14 @@ class LoopingNode(Node):
         if problem:
             self.get_logger().info(f"inputs read through the public rclpy API (more CPU): {problem}")
         self.loop.start()
-        # The thread sets its own scheduling: say what it got (or why not) once it has.
+        # The thread sets its own scheduling: say what it got (or why not) once it has. A refused
+        # SCHED_FIFO was asked for explicitly; the slice is asked for by default, and kernels
+        # before 6.12 have none: no warning on every start there.
         self.loop.configured.wait(1.0)
-        for problem in (self.loop.realtime_error, self.loop.scheduler_slice_error):
-            if problem:
-                self.get_logger().warning(f"loop thread: {problem}")
+        if self.loop.realtime_error:
+            self.get_logger().warning(f"loop thread: {self.loop.realtime_error}")
+        if self.loop.scheduler_slice_error:
+            self.get_logger().info(f"loop thread: {self.loop.scheduler_slice_error}")
         self.get_logger().info(f"loop at {rate_hz:g} Hz, thread scheduling: {self.loop.scheduling or 'unknown'}")
 
     # --- what subclasses provide ---------------------------------------------------------------
