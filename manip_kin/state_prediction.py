@@ -72,7 +72,16 @@ def predict_positions(q, qdot, horizon: float, lower, upper) -> np.ndarray:
         ``q + qdot·horizon``, shape (n,), stopped at a limit it would cross; a joint already
         outside its limits (a reported state may be, by a margin) is not moved onto them.
     """
-    return np.array(_predicted(_floats(q), _floats(qdot), horizon, _floats(lower), _floats(upper)))
+    predicted = []
+    for position, rate, low, high in zip(_floats(q), _floats(qdot), _floats(lower), _floats(upper)):
+        value = position + rate * horizon
+        # clamp to [min(low, position), max(high, position)]
+        if value > high:
+            value = high if position <= high else min(value, position)
+        elif value < low:
+            value = low if position >= low else max(value, position)
+        predicted.append(value)
+    return np.array(predicted)
 
 
 def _floats(values) -> list:
@@ -81,20 +90,6 @@ def _floats(values) -> list:
     if type(values) is np.ndarray:
         return values.tolist()
     return values if type(values) is list else [float(v) for v in values]
-
-
-def _predicted(q: list, qdot: list, horizon: float, lower: list, upper: list) -> list:
-    """:func:`predict_positions` on lists of floats."""
-    predicted = []
-    for position, rate, low, high in zip(q, qdot, lower, upper):
-        value = position + rate * horizon
-        # clamp to [min(low, position), max(high, position)]
-        if value > high:
-            value = high if position <= high else min(value, position)
-        elif value < low:
-            value = low if position >= low else max(value, position)
-        predicted.append(value)
-    return predicted
 
 
 def state_for_command(
@@ -123,4 +118,4 @@ def state_for_command(
         if not abs(rate) <= limit:  # False for NaN too
             return q
     horizon = command_horizon(state_age, period, command_latency)
-    return np.array(_predicted(_floats(q), rates, horizon, _floats(lower), _floats(upper)))
+    return predict_positions(q, rates, horizon, lower, upper)

@@ -131,24 +131,32 @@ def set_scheduler_slice(slice_ns: int) -> tuple[int, str]:
     numbers = _SCHED_ATTR_SYSCALLS.get(os.uname().machine)
     if numbers is None:
         return 0, f"sched_setattr not wired for {os.uname().machine}"
+    setattr_number, getattr_number = numbers
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        buffer = ctypes.create_string_buffer(_SCHED_ATTR.size)
-        if libc.syscall(numbers[1], 0, buffer, _SCHED_ATTR.size, 0) != 0:
+
+        def read() -> list | None:
+            """The calling thread's sched_attr fields, or None (errno set)."""
+            buffer = ctypes.create_string_buffer(_SCHED_ATTR.size)
+            if libc.syscall(getattr_number, 0, buffer, _SCHED_ATTR.size, 0) != 0:
+                return None
+            return list(_SCHED_ATTR.unpack(buffer.raw))
+
+        fields = read()
+        if fields is None:
             return 0, f"sched_getattr failed: {os.strerror(ctypes.get_errno())}"
-        fields = list(_SCHED_ATTR.unpack(buffer.raw))
         if fields[1] != os.SCHED_OTHER:
             return 0, f"the thread's policy is {fields[1]}, not SCHED_OTHER"
         fields[0], fields[2], fields[5] = _SCHED_ATTR.size, 0, int(slice_ns)  # size, flags, runtime
         buffer = ctypes.create_string_buffer(_SCHED_ATTR.pack(*fields), _SCHED_ATTR.size)
-        if libc.syscall(numbers[0], 0, buffer, 0) != 0:
+        if libc.syscall(setattr_number, 0, buffer, 0) != 0:
             return 0, f"sched_setattr failed: {os.strerror(ctypes.get_errno())}"
-        buffer = ctypes.create_string_buffer(_SCHED_ATTR.size)
-        if libc.syscall(numbers[1], 0, buffer, _SCHED_ATTR.size, 0) != 0:
+        fields = read()
+        if fields is None:
             return 0, f"sched_getattr failed: {os.strerror(ctypes.get_errno())}"
     except (OSError, AttributeError) as error:
         return 0, f"sched_setattr not available: {error}"
-    granted = _SCHED_ATTR.unpack(buffer.raw)[5]
+    granted = fields[5]
     if not granted:
         return 0, "this kernel has no per-thread slices (Linux 6.12 or later)"
     return granted, ""

@@ -49,6 +49,7 @@ class JointStateMapper:
         largest = np.finfo(float).max
         self.lower = np.full(n, -largest) if lower is None else np.maximum(np.asarray(lower, dtype=float), -largest)
         self.upper = np.full(n, largest) if upper is None else np.minimum(np.asarray(upper, dtype=float), largest)
+        self._ranges = tuple(zip(self.lower.tolist(), self.upper.tolist()))
         self._last_names: list[str] | None = None
         self._index: np.ndarray | None = None
         self._problem: str | None = None
@@ -102,6 +103,14 @@ class JointStateMapper:
                 f"valid: [{self.lower[i]:.6g}, {self.upper[i]:.6g}] (limits with a margin)"
             )
         return ordered
+
+    def checked_values(self, values: Sequence[float]) -> np.ndarray:
+        """:meth:`check_positions` of plain floats (model order), as an array: the 1 kHz path,
+        where Python comparisons on n ≈ 6 floats cost a third of numpy's calls."""
+        for value, (lower, upper) in zip(values, self._ranges):
+            if not lower <= value <= upper:  # False for NaN too
+                return self.check_positions(np.array(values, dtype=float))  # raises, saying what is wrong
+        return np.array(values, dtype=float)
 
     def _rebuild(self, names: list[str]) -> None:
         self._last_names = names
