@@ -25,7 +25,8 @@ The law runs as one generated function per model and configuration
 (:func:`manip_kin.fast_step.step_source`) on plain floats: the model's unrolled kinematics,
 the pose error with the rotation vector of :mod:`manip_kin.rotations`, and the unrolled
 damped solve; numpy only builds the output arrays. Near a singularity (ruled out cheaply by
-``det`` and ``tr`` of ``J Jᵀ``, see :func:`manip_kin.unrolled_linalg.smallest_eigenvalue_bound`)
+``det`` and the angular and linear traces of ``J Jᵀ``, see
+:func:`manip_kin.unrolled_linalg.smallest_eigenvalue_bound`)
 it calls the one damped least-squares solve (:class:`manip_kin.damped_least_squares.DampedSolver`),
 which computes ``σ_min`` exactly; at a position limit it calls :meth:`CartesianController._redistribute`.
 """
@@ -240,6 +241,7 @@ class CartesianController:
             lower=self._lower if config.respect_position_limits else None,
             upper=self._upper if config.respect_position_limits else None,
             inverse_velocity_limits=self._inverse_velocity_limits if config.respect_velocity_limits else None,
+            absurd=_ABSURD,
         )
 
     def _solve_uncertified(self, values: Sequence[float], rhs: list) -> tuple[list, float, bool, float]:
@@ -274,15 +276,7 @@ class CartesianController:
             goal = _goal_rows(goal_pose)
         feed_forward = _NO_FEED_FORWARD if goal_twist is None else _feed_forward_values(goal_twist)
         try:
-            # Finite but absurd q or goal position (1e300) would overflow the step into NaN rates.
-            if (
-                -_ABSURD < min(q_values)
-                and max(q_values) < _ABSURD
-                and abs(goal[0][3]) + abs(goal[1][3]) + abs(goal[2][3]) < _ABSURD
-            ):
-                output = self._step(q_values, goal, feed_forward, dt)
-            else:
-                output = None
+            output = self._step(q_values, goal, feed_forward, dt)
         except (ArithmeticError, ValueError):
             output = None  # the input is unusable (a wrong q length, a degenerate goal): say why
         if output is None:

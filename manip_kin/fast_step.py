@@ -34,13 +34,15 @@ from manip_kin.rotations import rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
     _cholesky_body,
-    _determinant_and_trace,
+    _cholesky_solve_lines,
+    _determinant_and_traces,
     _inverse_trace_lines,
     _product,
     _sum,
     chain_constants,
     damped_solve_lines,
     jacobian_entries,
+    smallest_eigenvalue_bound,
 )
 
 # Functions the generated sources call by these names.
@@ -135,14 +137,16 @@ def step_source(
     lower: Sequence[float] | None,
     upper: Sequence[float] | None,
     inverse_velocity_limits: Sequence[float] | None,
+    absurd: float,
 ) -> str:
     """Source of ``step(q, g, f, dt)``: the control law of :mod:`manip_kin.control`, every case.
 
     The generated function takes ``q`` (n floats), the goal pose rows ``g`` (at least 3
     rows of 4 floats), the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and
     returns a :class:`manip_kin.control.ControlOutput` (the class is given as ``OUTPUT``
-    when compiling), or None for input it cannot use (a non-finite value, ``dt <= 0``; it
-    may also raise on a wrong ``q`` length). ``lower``/``upper`` None skip the position
+    when compiling), or None for input it cannot use (a non-finite value, ``dt <= 0``, a
+    joint value or the sum of the goal position's absolute coordinates not within
+    ``±absurd``; it may also raise on a wrong ``q`` length). ``lower``/``upper`` None skip the position
     limits, ``inverse_velocity_limits`` None the velocity scaling.
 
     The common case runs inline: the undamped solve, certified by the eigenvalue bounds of
@@ -156,6 +160,11 @@ def step_source(
     lines, tokens, constants = _chain_and_error_lines("def step(q, g, f, dt):", chain, dof)
     lines.insert(1, "    if not 0.0 < dt < INFINITY:")
     lines.insert(2, "        return None")
+    # Finite but absurd joint values or goal position (1e300) would overflow the arithmetic
+    # into NaN rates: refused here (one comparison per value), explained by the caller.
+    inside = " and ".join(f"{-absurd!r} < q{j} < {absurd!r}" for j in range(n))
+    lines.append(f"    if not ({inside} and abs(GX) + abs(GY) + abs(GZ) < {absurd!r}):")
+    lines.append("        return None")
     lines.append("    F0, F1, F2, F3, F4, F5 = f")
     for i, r in enumerate(rows):
         gain = gain_angular if r < 3 else gain_linear
@@ -170,28 +179,33 @@ def step_source(
     rhs = "[" + ", ".join(f"b{i}" for i in range(m)) + "]"
     qdot_names = ", ".join(f"QD{j}" for j in range(n)) + ","
     entries = jacobian_entries(n, rows, tokens, constants)
-    body, qdot = damped_solve_lines(entries, m, n, shifted=False)
+    # The undamped solve waits until the certificate has passed: a step near a singularity
+    # solves the shifted system instead.
+    body, qdot = damped_solve_lines(entries, m, n, shifted=False, solve=False)
     # One pass of a loop: `continue` (a pivot that is not positive, a failed certificate) falls
     # to the `else` branch, the damped solve; `break` skips it.
     lines.append("    for _ in ONCE:")
     lines += ["    " + line.replace("return None", "continue") for line in body]
-    lines.append(f"        DET, TR = {_determinant_and_trace(m, shifted=False)}")
-    # σ_min² >= ε² is certified by the AM-GM bound det·((m-1)/tr)^(m-1) when the eigenvalues
-    # are similar, else by 1/tr((JJᵀ)⁻¹) (within a factor m of λ_min, a few more flops); see
-    # unrolled_linalg.smallest_eigenvalue_bound.
+    lines.append(f"        DET, TA, TL = {_determinant_and_traces(rows, shifted=False)}")
+    # σ_min² >= ε² is certified by the scaled AM-GM bound from det and the angular and linear
+    # traces (unrolled_linalg.smallest_eigenvalue_bound, inlined), else by 1/tr((JJᵀ)⁻¹)
+    # (within a factor m of λ_min, a few more flops).
     lines.append("        MANIPULABILITY = sqrt(DET)")
+    angular = sum(1 for r in rows if r < 3)
+    arguments = ["DET", "TA", str(angular), "TL", str(m - angular)]
+    lines += inline_lines(smallest_eigenvalue_bound, arguments, ["BOUND"], "EB_", "        ")
     if m > 1:
         # λ_min <= every Cholesky pivot (a pivot is a Schur complement, and eigenvalues
         # interlace): a pivot below ε² proves a singularity without the inverse trace.
         pivots = " or ".join(f"p{j} < {epsilon_sq!r}" for j in range(m))
-        lines.append(f"        if DET * ({m - 1}.0 / TR) ** {m - 1} < {epsilon_sq!r}:")
+        lines.append(f"        if not BOUND >= {epsilon_sq!r}:")
         lines.append(f"            UNCERTIFIED = {pivots}")
         lines.append("            if not UNCERTIFIED:")
         lines += ["            " + line for line in _inverse_trace_lines(m)]
         lines.append(f"                UNCERTIFIED = inverse_trace * {epsilon_sq!r} > 1.0")
         lines.append("            if UNCERTIFIED:")
     else:
-        lines += [f"        if DET < {epsilon_sq!r}:", "            if True:"]
+        lines += [f"        if not BOUND >= {epsilon_sq!r}:", "            if True:"]
     # Possibly near a singularity: σ_min² from the eigenvalues of J Jᵀ (the a's above), the
     # damping from the one rule (damped_least_squares.damping_sq, inlined), a shifted solve.
     gram = ", ".join(f"a{max(i, k)}_{min(i, k)}" for i in range(m) for k in range(m))
@@ -208,6 +222,7 @@ def step_source(
     # No damping configured (λ_max = 0) below ε: the least-squares fallback of the solver.
     lines.append(f"{deep}if SIGMA_SQ < {epsilon_sq!r}:")
     lines.append(f"{deep}    continue")
+    lines += ["    " + line for line in _cholesky_solve_lines(m)]
     for j in range(n):
         lines.append(f"        QD{j} = {qdot[j]}")
     lines.append("        LAMBDA = 0.0; SINGULAR = False")
@@ -243,10 +258,11 @@ def step_source(
     # The ControlOutput is filled through __dict__ (it is a frozen dataclass; its __init__
     # would set each field through object.__setattr__, several times slower).
     lines.append("    OUT = NEW(OUTPUT)")
+    # Three arrays of their own: no dearer than views into one (measured), and a kept q̇
+    # does not keep the errors alive.
     lines.append(
-        # One array for the three vectors (separate regions of it): one allocation, not three.
-        f"    ALL = array(({', '.join(f'QD{j}' for j in range(n))}, E0, E1, E2, E3, E4, E5))\n"
-        f"    OUT.__dict__.update(qdot=ALL[:{n}], orientation_error=ALL[{n}:{n + 3}], position_error=ALL[{n + 3}:], "
+        f"    OUT.__dict__.update(qdot=array(({', '.join(f'QD{j}' for j in range(n))},)), "
+        "orientation_error=array((E0, E1, E2)), position_error=array((E3, E4, E5)), "
         "manipulability=MANIPULABILITY, damping=LAMBDA, velocity_scale=S, limited_joints=LIMITED, "
         "singular=SINGULAR)"
     )

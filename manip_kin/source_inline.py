@@ -21,11 +21,24 @@ from collections.abc import Callable, Sequence
 
 
 class _Renamer(ast.NodeTransformer):
-    def __init__(self, mapping: dict[str, str]):
+    def __init__(self, mapping: dict[str, str], constants: dict[str, int | float]):
         self.mapping = mapping
+        self.constants = constants
 
-    def visit_Name(self, node: ast.Name) -> ast.Name:
+    def visit_Name(self, node: ast.Name) -> ast.expr:
+        if node.id in self.constants and isinstance(node.ctx, ast.Load):
+            return ast.copy_location(ast.Constant(value=self.constants[node.id]), node)
         return ast.copy_location(ast.Name(id=self.mapping.get(node.id, node.id), ctx=node.ctx), node)
+
+
+def _number(text: str) -> int | float | None:
+    """The value of a non-negative int or float literal (``3``, ``1e-4``), else None (a
+    negative one stays an expression: a constant -1 as the base of ``**`` would need brackets)."""
+    try:
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return None
+    return value if type(value) in (int, float) and value >= 0 else None
 
 
 def inline_lines(
@@ -35,8 +48,8 @@ def inline_lines(
 
     Args:
         function: the function to inline (see the module docstring for what qualifies).
-        arguments: one expression per parameter; a plain name is substituted, anything else
-            is first assigned to a prefixed local.
+        arguments: one expression per parameter; a plain name or a number literal is
+            substituted, anything else is first assigned to a prefixed local.
         results: names the returned value is unpacked into (one name for a non-tuple return).
         prefix: prefix of the function's locals in the generated code (must not clash).
         indent: indentation of every returned line.
@@ -67,14 +80,18 @@ def inline_lines(
         if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store)
     }
     mapping = {name: prefix + name for name in assigned}
+    constants: dict[str, int | float] = {}
     lines = []
     for parameter, argument in zip(parameters, arguments):
         if argument.isidentifier():
             mapping[parameter] = argument
+        elif _number(argument) is not None and parameter not in assigned:
+            # A literal goes in as itself, so that the compiler folds arithmetic on it.
+            constants[parameter] = _number(argument)
         else:
             mapping[parameter] = prefix + parameter
             lines.append(f"{prefix}{parameter} = {argument}")
-    renamer = _Renamer(mapping)
+    renamer = _Renamer(mapping, constants)
     statements = [renamer.visit(statement) for statement in body[:-1]]
     returned = renamer.visit(body[-1]).value
     lines += [ast.unparse(statement) for statement in statements]

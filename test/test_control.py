@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from kin_reference import rodrigues
 
 from manip_kin.control import CartesianController, ControllerConfig, pose_error
@@ -574,10 +576,13 @@ def test_unrolled_damped_solve_matches_numpy():
             b = rng.normal(size=len(rows))
             shift = rng.choice([0.0, 1e-3])
             gram = jacobian @ jacobian.T + shift * np.eye(len(rows))
-            qdot, determinant, trace, inverse_trace = folded(values, b.tolist(), shift)
+            qdot, determinant, trace_angular, trace_linear, inverse_trace = folded(values, b.tolist(), shift)
             np.testing.assert_allclose(qdot, jacobian.T @ np.linalg.solve(gram, b), rtol=1e-5, atol=1e-8)
             assert determinant == pytest.approx(np.linalg.det(gram), rel=1e-5)
-            assert trace == pytest.approx(np.trace(gram), rel=1e-8)
+            angular = [i for i, r in enumerate(rows) if r < 3]
+            linear = [i for i, r in enumerate(rows) if r >= 3]
+            assert trace_angular == pytest.approx(np.trace(gram[np.ix_(angular, angular)]), rel=1e-8, abs=0.0)
+            assert trace_linear == pytest.approx(np.trace(gram[np.ix_(linear, linear)]), rel=1e-8)
             assert inverse_trace == pytest.approx(np.trace(np.linalg.inv(gram)), rel=1e-5)
             np.testing.assert_allclose(unfolded(values, b.tolist(), shift)[0], qdot, rtol=1e-12, atol=1e-15)
     # A zero Jacobian (every column zeroed) without damping is singular: None, not a crash.
@@ -586,19 +591,56 @@ def test_unrolled_damped_solve_matches_numpy():
     assert damped_solver(chain, 7, range(6), fold_constants=False)(zeroed, [1.0] * 6, 0.0) is None
 
 
-def test_smallest_eigenvalue_bound_is_a_lower_bound():
+@settings(max_examples=300, deadline=None)
+@given(
+    size_a=st.integers(0, 4),
+    size_b=st.integers(0, 4),
+    scale_b=st.floats(1e-3, 1e3),
+    spread=st.floats(0.0, 8.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_smallest_eigenvalue_bound_is_a_lower_bound(size_a, size_b, scale_b, spread, seed):
+    """The scaled AM–GM bound never exceeds λ_min (numpy's eigvalsh, with a margin for its
+    rounding), is never below the plain bound det·((m-1)/tr)^(m-1), and is the optimum it claims
+    to be: shrinking either group's diagonal by any u <= 1 gives a bound no larger."""
     from manip_kin.unrolled_linalg import smallest_eigenvalue_bound
 
-    rng = np.random.default_rng(13)
-    for size in (1, 3, 6):
-        for _ in range(200):
-            factor = rng.normal(size=(size, size + 1)) * rng.uniform(0.01, 3.0, size=(size, 1))
-            matrix = factor @ factor.T
-            eigenvalues = np.linalg.eigvalsh(matrix)
-            bound = smallest_eigenvalue_bound(np.prod(eigenvalues), np.sum(eigenvalues), size)
-            assert bound <= eigenvalues[0] * (1 + 1e-9)
-        # Nearly tight when the other eigenvalues are equal and much larger.
-        if size > 1:
-            eigenvalues = np.array([1e-4] + [2.0] * (size - 1))
-            bound = smallest_eigenvalue_bound(np.prod(eigenvalues), np.sum(eigenvalues), size)
-            assert bound == pytest.approx(1e-4, rel=1e-3)
+    size = size_a + size_b
+    assume(size >= 1)
+    rng = np.random.default_rng(seed)
+    # Columns of spread magnitudes; the second group's rows in another unit (metres against radians).
+    factor = rng.normal(size=(size, size + 1)) * np.exp(rng.uniform(-spread, spread, size=size + 1))
+    factor[size_a:] *= scale_b
+    matrix = factor @ factor.T
+    eigenvalues = np.linalg.eigvalsh(matrix)
+    determinant = float(np.prod(eigenvalues))
+    trace_a, trace_b = float(np.trace(matrix[:size_a, :size_a])), float(np.trace(matrix[size_a:, size_a:]))
+    bound = smallest_eigenvalue_bound(determinant, trace_a, size_a, trace_b, size_b)
+    assert bound <= eigenvalues[0] + 1e-9 * eigenvalues[-1]
+    if size == 1:
+        assert bound == pytest.approx(determinant)
+        return
+    plain = determinant * ((size - 1) / (trace_a + trace_b)) ** (size - 1)
+    assert bound >= plain * (1 - 1e-12)
+    for shrink in np.linspace(0.01, 1.0, 25):
+        for u_a, u_b in ((shrink, 1.0), (1.0, shrink)):
+            scaled_trace = u_a * trace_a + u_b * trace_b
+            scaled = determinant * u_a**size_a * u_b**size_b * ((size - 1) / scaled_trace) ** (size - 1)
+            assert bound >= scaled * (1 - 1e-9)
+
+
+def test_smallest_eigenvalue_bound_is_nearly_tight_where_it_should_be():
+    from manip_kin.unrolled_linalg import smallest_eigenvalue_bound
+
+    # The other eigenvalues equal and much larger than λ_min: the plain bound is nearly λ_min.
+    eigenvalues = np.array([1e-4] + [2.0] * 5)
+    bound = smallest_eigenvalue_bound(float(np.prod(eigenvalues)), 6.0, 3, 4.0 + 1e-4, 3)
+    assert bound == pytest.approx(1e-4, rel=1e-3)
+    # Angular rows ~1, linear rows ~0.01 (a short arm): the plain bound is hundreds of times
+    # below λ_min, the scaled one close to it.
+    matrix = np.diag([1.0, 1.2, 0.9, 0.01, 0.012, 2e-4])
+    determinant = float(np.linalg.det(matrix))
+    plain = determinant * (5 / np.trace(matrix)) ** 5
+    scaled = smallest_eigenvalue_bound(determinant, 3.1, 3, 0.0222, 3)
+    assert plain < 2e-4 / 500
+    assert 2e-4 / 1.2 < scaled <= 2e-4

@@ -160,6 +160,31 @@ def test_inlined_rotation_vector_is_axis_times_angle(axis, angle):
         assert abs(float(np.dot(inlined, axis))) == pytest.approx(angle, abs=1e-6)
 
 
+@settings(max_examples=100)
+@given(
+    st.floats(0.0, 1e6),
+    st.floats(1e-6, 1e3),
+    st.integers(0, 4),
+    st.floats(1e-6, 1e3),
+    st.integers(0, 4),
+)
+def test_inliner_puts_literal_arguments_in_as_constants(determinant, trace_a, size_a, trace_b, size_b):
+    """A number literal replaces its parameter (no local holds it, so arithmetic on it folds)
+    and the inlined code computes what the function returns; names and expressions as before."""
+    from manip_kin.unrolled_linalg import smallest_eigenvalue_bound
+
+    lines = inline_lines(smallest_eigenvalue_bound, ["DET", "TA", str(size_a), "(TB)", str(size_b)], ["BOUND"], "EB_")
+    assert not any(line.strip().startswith(("EB_size_a", "EB_size_b")) for line in lines)
+    assert any(line.strip().startswith("EB_trace_b = (TB)") or "EB_trace_b = TB" in line for line in lines)
+    source = "def f(DET, TA, TB):\n" + "\n".join(lines) + "\n    return BOUND\n"
+    namespace: dict = {}
+    exec(source, namespace)  # noqa: S102 - test source
+    if size_a + size_b == 0:
+        return
+    expected = smallest_eigenvalue_bound(determinant, trace_a, size_a, trace_b, size_b)
+    assert namespace["f"](determinant, trace_a, trace_b) == expected
+
+
 def test_inliner_refuses_what_it_cannot_inline():
     def early_return(x):
         if x > 0:
