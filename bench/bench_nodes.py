@@ -113,7 +113,11 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     client.unwatch_state()  # the measurement reads only the commands
     pose, jac = pose_and_jacobian_in_base(model, q, model.frame_index("tool"))
     z_row = jac[5]
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, PolledSubscription, set_timer_slack
+    from rclpy.qos import QoSProfile
+    from rclpy.serialization import deserialize_message
+
+    from manip_kin.nodes.polling import RawSubscription
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
     # this thread gets the same priority, or the measurement would wait behind them.
@@ -122,12 +126,14 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
         except OSError:
             pass
-    commands = PolledSubscription(client.node, Float64MultiArray, "joint_velocity_commands", 100)
+    # With their middleware info: when the controller published the command (source
+    # timestamp) and when this process's middleware had it (received timestamp).
+    commands = RawSubscription(client.node, Float64MultiArray, "joint_velocity_commands", QoSProfile(depth=100))
     # Poll in 20 µs steps, not 20 µs + the default 50 µs timer slack.
     set_timer_slack(TIMER_SLACK_NS)
     client.spin_for(0.5)
     publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "goal_pose")
-    latencies = []
+    latencies, published, received = [], [], []
     try:
         for trial in range(trials):
             sign = 1.0 if trial % 2 == 0 else -1.0
@@ -137,27 +143,40 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
             while commands.take() is not None:
                 pass
             sent = time.monotonic_ns()
+            sent_wall = time.time_ns()  # the middleware's timestamps are on this clock
             publisher.publish(msg)
             deadline = sent + 500_000_000
             while time.monotonic_ns() < deadline:
-                command = commands.take()
-                if command is None:
+                taken = commands.take()
+                if taken is None:
                     time.sleep(20e-6)
                     continue
+                data, info = taken
+                command = deserialize_message(data, Float64MultiArray)
                 if float(z_row @ np.asarray(command.data)) * sign > 1e-4:
                     latencies.append((time.monotonic_ns() - sent) * 1e-6)
+                    published.append((info.get("source_timestamp", 0) - sent_wall) * 1e-6)
+                    received.append((info.get("received_timestamp", 0) - sent_wall) * 1e-6)
                     break
             time.sleep(0.01)
     finally:
         if priority:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     values = np.array(latencies) if latencies else np.array([math.nan])
+    # Where the time goes: goal published -> the command published by the controller (one hop
+    # and the reaction) -> in this process's middleware (the second hop) -> seen here (polling).
+    published_values = np.array(published) if published else np.array([math.nan])
+    received_values = np.array(received) if received else np.array([math.nan])
     return {
         "metric": f"goal-to-first-reacting-command latency, {label}",
         "p50_ms": float(np.percentile(values, 50)),
         "p99_ms": float(np.percentile(values, 99)),
         "max_ms": float(values.max()),
         "trials": len(latencies),
+        "command_published_p50_ms": float(np.percentile(published_values, 50)),
+        "command_published_p99_ms": float(np.percentile(published_values, 99)),
+        "command_received_p50_ms": float(np.percentile(received_values, 50)),
+        "command_received_p99_ms": float(np.percentile(received_values, 99)),
         "target": TARGETS["latency"],
         "reference": REFERENCE,
     }
@@ -243,6 +262,61 @@ def _round_trip_row(trials: int = 300, label: str = "idle machine") -> dict:
         "target": "(the floor under the goal-to-command latency: two such hops)",
         "reference": "same transport, wait set and polling as the nodes",
     }
+
+
+def _wake_up_times(trials: int = 1000) -> dict[str, list[float]]:
+    """Round trips [µs] of 8 bytes through two pipes to a forked process, both on one CPU and
+    on two CPUs, 2 ms apart (the far end sleeps between them, as a node's thread does).
+    Run in a process of its own (``bench_nodes.py wake``): it forks."""
+    results: dict[str, list[float]] = {}
+    for label, far_cpu in (("same CPU", 0), ("two CPUs", 1)):
+        to_far, from_near = os.pipe()
+        to_near, from_far = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the far end: echo until told to stop
+            os.sched_setaffinity(0, {far_cpu})
+            while (data := os.read(to_far, 8)) != b"stop0000":
+                os.write(from_far, data)
+            os._exit(0)
+        os.sched_setaffinity(0, {0})
+        times = []
+        for _ in range(trials):
+            begin = time.monotonic_ns()
+            os.write(from_near, b"ping0000")
+            os.read(to_near, 8)
+            times.append((time.monotonic_ns() - begin) * 1e-3)
+            time.sleep(0.002)
+        os.write(from_near, b"stop0000")
+        os.waitpid(pid, 0)
+        for fd in (to_far, from_near, to_near, from_far):
+            os.close(fd)
+        results[label] = times
+    os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
+    return results
+
+
+def _wake_up_rows() -> list[dict]:
+    """What waking a sleeping thread costs on this machine, on its own CPU and on another:
+    every hop of a message wakes one or two threads, most often on the other CPU."""
+    import subprocess
+
+    if len(os.sched_getaffinity(0)) < 2 or not {0, 1} <= os.sched_getaffinity(0):
+        return []
+    done = subprocess.run([sys.executable, __file__, "wake"], capture_output=True, text=True, timeout=120, check=True)
+    rows = []
+    for label, times in json.loads(done.stdout).items():
+        values = np.array(times)
+        rows.append(
+            {
+                "metric": f"pipe round trip to a sleeping process, {label} (two wake-ups, no middleware), idle",
+                "p50_us": float(np.percentile(values, 50)),
+                "p99_us": float(np.percentile(values, 99)),
+                "trials": len(times),
+                "target": "(the machine under the round trip: a wake-up across CPUs on this VM)",
+                "reference": "a bare-metal cross-CPU wake-up takes a few µs",
+            }
+        )
+    return rows
 
 
 def _line_row(rate_hz: float, priority: int) -> dict:
@@ -368,7 +442,7 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
     from manip_kin.pipeline import ensure_ros_isolation
 
     ensure_ros_isolation()
-    rows: list[dict] = [_round_trip_row()]
+    rows: list[dict] = _wake_up_rows() + [_round_trip_row()]
     for priority in priorities:
         for rate_hz in (500.0, 1000.0):
             rows += _loop_rows(rate_hz, priority)
@@ -381,9 +455,13 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
 
 
 if __name__ == "__main__":
-    # ``bench_nodes.py two``: only the two-pipeline figures; ``echo SECONDS``: the far end of the round trip.
+    # ``bench_nodes.py two``: only the two-pipeline figures; ``echo SECONDS``: the far end of the
+    # round trip; ``wake``: the wake-up times of _wake_up_rows.
     if sys.argv[1:2] == ["echo"]:
         _echo(float(sys.argv[2]))
+        sys.exit(0)
+    if sys.argv[1:2] == ["wake"]:
+        json.dump(_wake_up_times(), sys.stdout)
         sys.exit(0)
     results = run_two_pipeline_benchmarks() if sys.argv[1:] == ["two"] else run_node_benchmarks()
     json.dump(results, sys.stdout, indent=1)
