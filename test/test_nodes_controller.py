@@ -391,6 +391,36 @@ def test_scheduler_slice_parameter_reaches_the_loop_thread_and_its_status(harnes
     assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
 
 
+def test_a_blocked_cycle_is_logged_and_counted_and_commands_go_on(harness, capfd):
+    """A cycle blocked for 80 ms (many periods: what a middleware call can do) gives one WARN
+    line with its duration and ``loop_stalls`` in the status; the commands go on."""
+    node, commands, diagnostics = _start(harness)
+    assert harness.spin_until(lambda: len(commands) > 5, 5)
+    cycle = node.loop._cycle
+    blocked = []
+
+    def once_blocked(now_ns):
+        if not blocked:
+            blocked.append(now_ns)
+            time.sleep(0.08)
+        cycle(now_ns)
+
+    node.loop._cycle = once_blocked
+    assert harness.spin_until(lambda: node.loop.stats().stalls == 1, 5)
+    count = len(commands)
+    assert harness.spin_until(lambda: len(commands) > count + 20, 5)
+
+    def stall_reported():
+        values = [dict((kv.key, kv.value) for kv in s.values) for s in statuses(diagnostics, "cartesian_controller")]
+        return any(v.get("loop_stalls") == "1" and float(v.get("loop_longest_cycle_ms", 0)) >= 80 for v in values)
+
+    assert harness.spin_until(stall_reported, 5)
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if "a cycle took" in line]
+    assert len(lines) == 1 and "WARN" in lines[0] and f"of a {1000 / RATE:g} ms period" in lines[0], err[-2000:]
+    assert 80.0 <= float(lines[0].split("a cycle took ")[1].split(" ms")[0]) < 1000.0
+
+
 def test_diagnostics_rate_parameter(harness):
     """diagnostics_rate_hz 2 (default 10): in a steady state statuses come 0.5 s apart, never closer."""
     node, _, diagnostics = _start(harness, diagnostics_rate_hz=2.0)

@@ -55,6 +55,42 @@ def test_rate_loop_runs_at_rate_survives_errors_and_stops():
         RateLoop(0.0, cycle)
 
 
+def test_a_cycle_that_blocks_for_many_periods_is_reported_and_the_loop_goes_on():
+    """A cycle longer than ten periods (at least 20 ms) is a stall: reported once with its
+    duration, counted in the stats; a cycle just under the threshold is not; the loop goes on."""
+    calls = []
+    stalls = []
+
+    def cycle(now_ns):
+        calls.append(now_ns)
+        if len(calls) == 5:
+            time.sleep(0.015)  # under 10 periods of 2 ms = 20 ms: slow, not a stall
+        if len(calls) == 10:
+            time.sleep(0.06)  # blocked for 30 periods
+
+    loop = RateLoop(500.0, cycle, name="stall_loop", on_stall=stalls.append)
+    assert loop.stall_ns == 20_000_000
+    loop.start()
+    deadline = time.monotonic() + 30
+    while len(calls) < 60 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    loop.stop()
+    assert len(calls) >= 60  # it went on
+    assert len(stalls) == 1
+    assert 60e6 <= stalls[0] < 60e6 + 1e9  # the blocked cycle's own duration
+    stats = loop.stats()
+    assert stats.stalls == 1
+    assert stats.longest_cycle_ms == pytest.approx(stalls[0] * 1e-6)
+    # A handler that raises is reported on stderr; the loop survives it too.
+    failing = RateLoop(500.0, lambda now_ns: time.sleep(0.03), name="stall_loop_2", on_stall=lambda ns: 1 / 0)
+    failing.start()
+    deadline = time.monotonic() + 30
+    while failing.stats().stalls < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    failing.stop()
+    assert failing.stats().stalls >= 2
+
+
 def test_loop_thread_sleeps_with_a_short_timer_slack():
     # Linux wakes a sleeping thread up to its timer slack late (50 us by default); the loop
     # thread asks for TIMER_SLACK_NS, and only its own thread (the caller keeps its slack).

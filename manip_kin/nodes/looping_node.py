@@ -70,6 +70,7 @@ class LoopingNode(Node):
         # microseconds a call at 1 kHz), unless use_sim_time.
         self._wall_clock = not self.get_parameter("use_sim_time").value
         self._cycle_error_log = ThrottledLog(self.get_logger().error, 1.0)
+        self._stall_log = ThrottledLog(self.get_logger().warning, 5.0)
         self._last_error_status_ns = 0
         self._fatal_guard = self.create_guard_condition(self._raise_gave_up)
         self.waiter = LoopWaiter(self, list(wake_on)) if wake_on else None
@@ -83,6 +84,7 @@ class LoopingNode(Node):
             wait=self.waiter.wait if self.waiter is not None else None,
             on_fatal=self._on_loop_gave_up,
             give_up_after=self.GIVE_UP_AFTER_S,
+            on_stall=self._on_loop_stall,
         )
         problem = fast_path_problem()
         if problem:
@@ -117,6 +119,16 @@ class LoopingNode(Node):
     def diagnostic_level(self, level: str) -> str:
         """``level``, raised to ``error`` while a cycle error is recent."""
         return "error" if self.loop_error() else level
+
+    def _on_loop_stall(self, duration_ns: int) -> None:
+        """A cycle blocked for many periods: say so (throttled), the loop goes on."""
+        period_ms = self.loop.period_ns * 1e-6
+        self._stall_log(
+            "stall",
+            f"a cycle took {duration_ns * 1e-6:.1f} ms of a {period_ms:g} ms period: something in it blocked "
+            "(Fast DDS's shared-memory transport can hold a publish up to 1/3 s the first time it sends "
+            "to a new participant); the loop goes on, loop_stalls in /diagnostics counts these",
+        )
 
     def _on_loop_error(self, error: BaseException) -> None:
         if not self.context.ok():  # shutting down: publishers are gone, end the loop quietly

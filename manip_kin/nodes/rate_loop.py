@@ -73,6 +73,9 @@ class LoopStats:
         woken: cycles run early because a message woke the loop (their periods are not in
             the window statistics: they are reactions, not schedule).
         scheduling: how the kernel schedules the loop thread (:attr:`RateLoop.scheduling`).
+        stalls: cycles since start that took longer than :attr:`RateLoop.stall_ns` (blocked
+            inside: the schedule is lost for that long).
+        longest_cycle_ms: the longest cycle since start [ms].
     """
 
     target_rate_hz: float
@@ -87,6 +90,8 @@ class LoopStats:
     samples: int
     woken: int = 0
     scheduling: str = ""
+    stalls: int = 0
+    longest_cycle_ms: float = 0.0
 
 
 #: Timer slack of a loop thread [ns]. Linux lets a sleeping thread wake up to its slack
@@ -185,6 +190,9 @@ class RateLoop:
         min_rate_fraction: see ``give_up_after``. A quarter by default: a loop slowed by a
             busy machine keeps going (a restart would not give it CPU); one that has stalled
             (a wedged middleware call, a cycle far slower than its period) gives up.
+        on_stall: called with the duration [ns] of a cycle longer than :attr:`stall_ns`
+            (ten periods, at least 20 ms): one blocked inside, whose loss of schedule should
+            be said, not only counted. Called from the loop thread after the cycle.
     """
 
     def __init__(
@@ -200,6 +208,7 @@ class RateLoop:
         give_up_after: float = 10.0,
         min_rate_fraction: float = 0.25,
         scheduler_slice_ns: int = 0,
+        on_stall: Callable[[int], None] | None = None,
     ):
         if not 0 < rate_hz < 1e6:
             raise ValueError(f"rate_hz = {rate_hz}; valid: > 0 and < 1e6")
@@ -216,6 +225,11 @@ class RateLoop:
         self._overruns = 0
         self._errors = 0
         self._woken = 0
+        self._on_stall = on_stall
+        #: A cycle longer than this [ns] is a stall (see ``on_stall``).
+        self.stall_ns = max(10 * self.period_ns, 20_000_000)
+        self._stalls = 0
+        self._longest_ns = 0
         self._give_up_ns = int(give_up_after * 1e9)
         self._min_rate_fraction = float(min_rate_fraction)
         self.last_error = ""
@@ -322,6 +336,10 @@ class RateLoop:
                 failed = True
                 self._report(error)
             end = clock()
+            if end - start > self._longest_ns:
+                self._longest_ns = end - start
+            if end - start > self.stall_ns:
+                self._stalled(end - start)
             if last_start and not woken:
                 slot = self._count % window
                 self._periods_ns[slot] = start - last_start
@@ -354,6 +372,14 @@ class RateLoop:
         except Exception as handler_error:  # noqa: BLE001 - the error path must not end the loop
             safe_log(print, f"{self._name}: error handler failed: {type(handler_error).__name__}: {handler_error}")
 
+    def _stalled(self, duration_ns: int) -> None:
+        self._stalls += 1
+        if self._on_stall is not None:
+            try:
+                self._on_stall(duration_ns)
+            except Exception as error:  # noqa: BLE001 - reporting must not end the loop
+                safe_log(print, f"{self._name}: stall handler failed: {type(error).__name__}: {error}")
+
     def _give_up(self, cycles: int, failures: int, seconds: float) -> None:
         give_up_s = self._give_up_ns * 1e-9
         if failures >= cycles:
@@ -376,7 +402,20 @@ class RateLoop:
         count = min(self._count, self._periods_ns.shape[0])
         if count == 0:
             return LoopStats(
-                self.rate_hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0, self._overruns, self._errors, 0, self._woken, self.scheduling
+                self.rate_hz,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0,
+                self._overruns,
+                self._errors,
+                0,
+                self._woken,
+                self.scheduling,
+                self._stalls,
+                self._longest_ns * 1e-6,
             )
         periods = self._periods_ns[:count].astype(float)
         compute = self._compute_ns[:count].astype(float)
@@ -396,6 +435,8 @@ class RateLoop:
             samples=count,
             woken=self._woken,
             scheduling=self.scheduling,
+            stalls=self._stalls,
+            longest_cycle_ms=self._longest_ns * 1e-6,
         )
 
 
@@ -413,6 +454,8 @@ def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
         ("loop_errors", str(stats.errors)),
         ("loop_woken", str(stats.woken)),
         ("loop_scheduling", stats.scheduling),
+        ("loop_stalls", str(stats.stalls)),
+        ("loop_longest_cycle_ms", f"{stats.longest_cycle_ms:.3f}"),
     ]
 
 
