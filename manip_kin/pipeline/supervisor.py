@@ -245,8 +245,16 @@ class Pipeline:
             # Fast DDS 2.14 (Jazzy): the shared-memory port a SIGKILLed process leaves behind can
             # leave its successor matched but receiving nothing (eProsima/Fast-DDS#5053, #2811;
             # seen once here: a restarted controller without joint states for 40 s). UDP does not.
+            # rmw_fastrtps honours the variable only where it keeps Fast DDS's built-in
+            # transports: with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST it configures shared
+            # memory and UDP itself, so the log says so rather than claim a switch.
             env = {**env, FAST_DDS_TRANSPORTS: "UDPv4"}
-            log.write(f"# restarted after a SIGKILL: {FAST_DDS_TRANSPORTS}=UDPv4\n".encode())
+            note = ""
+            if env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") == "LOCALHOST":
+                note = (
+                    " (no effect with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: rmw_fastrtps adds shared memory itself)"
+                )
+            log.write(f"# restarted after a SIGKILL: {FAST_DDS_TRANSPORTS}=UDPv4{note}\n".encode())
         log.write(f"$ {' '.join(command)}\n".encode())
         log.flush()
         self._logs[name] = log
