@@ -78,11 +78,12 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         start = frame_pose(model, hardware.positions())
         target = start.copy()
         target[:3, 3] += [0.04, 0.0, -0.02]
-        # The tool's path: the hardware's own positions at each of its steps while the line runs
-        # (a thread sampling them in this busy process once got 11 samples, all at the start).
+        # The tool's path: the hardware's own positions at each of its steps from the line's start
+        # until the arm has settled on the target. (Until the line was done only, the hardware in
+        # this busy process twice recorded 11-12 steps: its steps can pause for most of a 1 s line,
+        # and the arm then finishes the motion after it.)
         first_step = len(hardware.history)
         done = client.wait_line_done(client.send_line(target, frame_id=model.base_frame), 60)
-        path = np.array([frame_pose(model, q)[:3, 3] for q in hardware.history[first_step:]])
         assert done.message == "holding", (done.message, pipeline.log_tail("trajectory_generator"))
         converged, status = client.wait_converged(done.values["final_goal_stamp"], timeout=60)
         assert converged, (status, pipeline.log_tail("cartesian_controller"))
@@ -90,15 +91,17 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         # joint state that can be a few ms old, and the hardware runs in this busy process.
         settled = lambda: np.abs(frame_pose(model, hardware.positions())[:3, 3] - target[:3, 3]).max() < 2e-4  # noqa: E731
         assert client.spin_until(settled, 10), frame_pose(model, hardware.positions())[:3, 3] - target[:3, 3]
+        path = np.array([frame_pose(model, q)[:3, 3] for q in hardware.history[first_step:]])
         # The planned line started at the tool pose of the joint states (the arm was at rest).
         log = pipeline.log_text("trajectory_generator")
         match = re.search(r"streaming a constant line from \[([^\]]*)\] to", log)
         assert match, log[-500:]
         np.testing.assert_allclose([float(v) for v in match.group(1).split(",")], start[:3, 3], atol=2e-4)
-        # It ran along the line: 1 mm is 50x what the delay of a 200 Hz loop explains (an offline
+        # It went along the line: 1 mm is 50x what the delay of a 200 Hz loop explains (an offline
         # estimate; the hardware runs in this busy process), and far below a line planned from a
-        # wrong start (a jump of centimetres).
+        # wrong start (a jump of centimetres); it got from the start to the target.
         assert len(path) > 50 and distance_to_segment(np.array(path), start[:3, 3], target[:3, 3]).max() < 1e-3
+        assert np.linalg.norm(path[0] - start[:3, 3]) < 2e-4 and np.linalg.norm(path[-1] - target[:3, 3]) < 2e-4
     finally:
         codes = pipeline.stop()
         if hardware is not None:
