@@ -402,20 +402,20 @@ class RateLoop:
         count = min(self._count, self._periods_ns.shape[0])
         if count == 0:
             return LoopStats(
-                self.rate_hz,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                0,
-                self._overruns,
-                self._errors,
-                0,
-                self._woken,
-                self.scheduling,
-                self._stalls,
-                self._longest_ns * 1e-6,
+                target_rate_hz=self.rate_hz,
+                rate_hz=0.0,
+                period_error_p99_ms=0.0,
+                period_error_max_ms=0.0,
+                compute_mean_ms=0.0,
+                compute_p99_ms=0.0,
+                cycles=0,
+                overruns=self._overruns,
+                errors=self._errors,
+                samples=0,
+                woken=self._woken,
+                scheduling=self.scheduling,
+                stalls=self._stalls,
+                longest_cycle_ms=self._longest_ns * 1e-6,
             )
         periods = self._periods_ns[:count].astype(float)
         compute = self._compute_ns[:count].astype(float)
