@@ -26,6 +26,8 @@ import math
 
 import numpy as np
 
+from manip_kin.plain_floats import float_list
+
 __all__ = [
     "MAX_STATE_AGE_PERIODS",
     "PLAUSIBLE_RATE_FACTOR",
@@ -73,7 +75,7 @@ def predict_positions(q, qdot, horizon: float, lower, upper) -> np.ndarray:
         outside its limits (a reported state may be, by a margin) is not moved onto them.
     """
     predicted = []
-    for position, rate, low, high in zip(_floats(q), _floats(qdot), _floats(lower), _floats(upper)):
+    for position, rate, low, high in zip(float_list(q), float_list(qdot), float_list(lower), float_list(upper)):
         value = position + rate * horizon
         # clamp to [min(low, position), max(high, position)]
         if value > high:
@@ -82,14 +84,6 @@ def predict_positions(q, qdot, horizon: float, lower, upper) -> np.ndarray:
             value = low if position >= low else max(value, position)
         predicted.append(value)
     return np.array(predicted)
-
-
-def _floats(values) -> list:
-    """A vector as a list of Python floats (the per-cycle path computes on plain floats: for a
-    handful of joints, numpy's per-call overhead costs more than the arithmetic)."""
-    if type(values) is np.ndarray:
-        return values.tolist()
-    return values if type(values) is list else [float(v) for v in values]
 
 
 def state_for_command(
@@ -113,8 +107,8 @@ def state_for_command(
     """
     if qdot is None or not -period <= state_age <= MAX_STATE_AGE_PERIODS * period:
         return q
-    rates = _floats(qdot)
-    for rate, limit in zip(rates, _floats(max_rate)):
+    rates = float_list(qdot)
+    for rate, limit in zip(rates, float_list(max_rate)):
         if not abs(rate) <= limit:  # False for NaN too
             return q
     horizon = command_horizon(state_age, period, command_latency)

@@ -23,6 +23,7 @@ import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.model import RobotModel
+from manip_kin.plain_floats import float_list
 
 COMPONENTS = ("rx", "ry", "rz", "x", "y", "z")
 NAMED_TASKS = {
@@ -91,8 +92,8 @@ class Task:
         Runs every control cycle: plain floats and loops (indexing a numpy array element by
         element costs more than the arithmetic).
         """
-        orientation = orientation_error.tolist() if type(orientation_error) is np.ndarray else orientation_error
-        position = position_error.tolist() if type(position_error) is np.ndarray else position_error
+        orientation = float_list(orientation_error)
+        position = float_list(position_error)
         orientation_squares = position_squares = 0.0
         for r in self.orientation_rows:
             orientation_squares += float(orientation[r]) ** 2
