@@ -129,6 +129,7 @@ class DampedSolver:
     def __init__(self, chain: Callable, dof: int, rows: Sequence[int]):
         self.dof = dof
         self.rows = tuple(rows)
+        self._angular_rows = sum(1 for r in self.rows if r < 3)  # the bound's group sizes
         #: ``shifted(values, b, d)``: the raw unrolled solve with a given ``d = λ²`` (see
         #: :func:`manip_kin.unrolled_linalg.damped_solver`), or None when not positive definite.
         self.shifted = damped_solver(chain, dof, self.rows, inverse_trace=True, fold_constants=False)
@@ -141,7 +142,7 @@ class DampedSolver:
         """True when an unshifted solve's ``(x, det, tr_angular, tr_linear, tr⁻¹)`` proves
         σ_min² >= ``threshold_sq``."""
         _, determinant, trace_angular, trace_linear, inverse_trace = result
-        angular = sum(1 for r in self.rows if r < 3)
+        angular = self._angular_rows
         bound = smallest_eigenvalue_bound(determinant, trace_angular, angular, trace_linear, len(self.rows) - angular)
         if bound >= threshold_sq:
             return True
