@@ -19,9 +19,9 @@
   ``/right``), both at 500 Hz and both tracking a goal: loop rate, p99 period error and
   CPU of each of the six nodes.
 
-Each configuration also runs with the loop threads at SCHED_FIFO priority
-(``realtime_priority``) where the machine allows it: on a shared machine the default
-scheduler lets other jobs delay a 1 ms loop.
+Each configuration also runs with the nodes at SCHED_FIFO priority (``realtime_priority``:
+the loop threads and the threads they wait on) where the machine allows it: on a shared
+machine the default scheduler lets other jobs delay a 1 ms loop.
 
 Run alone: ``.venv/bin/python bench/bench_nodes.py`` (``... two``: the two-pipeline rows only).
 """
@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
 import sys
 import tempfile
 import time
@@ -112,18 +113,21 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     q = client.current_positions()
     client.unwatch_state()  # the measurement reads only the commands
     pose, jac = pose_and_jacobian_in_base(model, q, model.frame_index("tool"))
-    z_row = jac[5]
+    z_row = jac[5].tolist()  # the tool's z velocity per joint velocity
     from rclpy.qos import QoSProfile
     from rclpy.serialization import deserialize_message
 
     from manip_kin.nodes.polling import RawSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, SharedPriority, set_timer_slack, share_realtime_priority
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
-    # this thread gets the same priority, or the measurement would wait behind them.
+    # this thread and the ones it waits on (as in the nodes) get the same priority, or the
+    # measurement would wait behind them.
+    shared = SharedPriority(0)
     if priority:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            shared = share_realtime_priority(priority)
         except OSError:
             pass
     # With their middleware info: when the controller published the command (source
@@ -133,6 +137,15 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     set_timer_slack(TIMER_SLACK_NS)
     client.spin_for(0.5)
     publisher = client.publisher(type(make_pose_stamped(pose, "base_link")), "goal_pose")
+    # The command's joint velocities are the last doubles of its CDR bytes (an empty layout):
+    # read there, checked once against rclpy. deserialize_message of a command cost ~85 µs
+    # (p50) here, run once per goal after a 10 ms sleep: it delayed the polling of the next.
+    tail = struct.Struct(f"<{len(q)}d")
+    first = client.spin_until(commands.take, 2.0)
+    if first is None or list(tail.unpack_from(first[0], len(first[0]) - tail.size)) != list(
+        deserialize_message(first[0], Float64MultiArray).data
+    ):
+        raise RuntimeError("joint_velocity_commands: not a Float64MultiArray with an empty layout")
     latencies, published, received = [], [], []
     try:
         for trial in range(trials):
@@ -151,10 +164,11 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
                 if taken is None:
                     time.sleep(20e-6)
                     continue
+                arrived = time.monotonic_ns()
                 data, info = taken
-                command = deserialize_message(data, Float64MultiArray)
-                if float(z_row @ np.asarray(command.data)) * sign > 1e-4:
-                    latencies.append((time.monotonic_ns() - sent) * 1e-6)
+                velocities = tail.unpack_from(data, len(data) - tail.size)
+                if sum(row * velocity for row, velocity in zip(z_row, velocities)) * sign > 1e-4:
+                    latencies.append((arrived - sent) * 1e-6)
                     published.append((info.get("source_timestamp", 0) - sent_wall) * 1e-6)
                     received.append((info.get("received_timestamp", 0) - sent_wall) * 1e-6)
                     break
@@ -162,6 +176,7 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict
     finally:
         if priority:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            shared.restore()
     values = np.array(latencies) if latencies else np.array([math.nan])
     # Where the time goes: goal published -> the command published by the controller (one hop
     # and the reaction) -> in this process's middleware (the second hop) -> seen here (polling).

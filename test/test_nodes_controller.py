@@ -9,7 +9,10 @@ ignored it.
 
 import math
 import os
+import re
+import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -365,7 +368,29 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
     else:
         assert node.loop.realtime_error == ""
         assert os.sched_getscheduler(node.loop._thread.native_id) == os.SCHED_FIFO
+        # The threads it waits on run at its priority while it runs: this (the executor's) thread,
+        # which may hold the GIL, and the middleware's receive threads (Fast DDS: dds.shm.<port>).
+        main = threading.get_native_id()
+        receive = _fast_dds_receive_threads()
+        assert len(receive) >= 2, receive
+        for thread_id in [main, *receive]:
+            assert os.sched_getscheduler(thread_id) == os.SCHED_FIFO, thread_id
+            assert os.sched_getparam(thread_id).sched_priority == 10
+        assert set(node.loop.shared_priority.middleware_threads) == set(receive)
+        assert harness.spin_until(lambda: len(commands) > 5, 5)
+        node.loop.stop()  # and back to normal scheduling when it stops
+        for thread_id in [main, *receive]:
+            assert os.sched_getscheduler(thread_id) == os.SCHED_OTHER, thread_id
     assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
+
+
+def _fast_dds_receive_threads() -> list[int]:
+    """This process's Fast DDS receive threads (named dds.shm.<port>, dds.udp.<port>)."""
+    found = []
+    for task in Path("/proc/self/task").iterdir():
+        if re.fullmatch(r"dds\.(shm|udp)\.\d+", (task / "comm").read_text().strip()):
+            found.append(int(task.name))
+    return found
 
 
 def test_scheduler_slice_parameter_reaches_the_loop_thread_and_its_status(harness):

@@ -5,6 +5,7 @@ Its own module so that its pipeline never shares the machine with test_pipeline.
 
 import math
 import os
+import re
 import subprocess
 import sysconfig
 from pathlib import Path
@@ -50,13 +51,22 @@ def irb120(tmp_path_factory):
 
 
 def test_realtime_priority_is_applied_where_permitted(irb120):
-    """Each node's loop thread really runs SCHED_FIFO (read from the kernel, not from a log)."""
+    """Each node's loop thread really runs SCHED_FIFO 10 (read from the kernel, not from a log),
+    and so do the middleware's receive threads it waits on and its executor (main) thread."""
     if REALTIME_ERROR:
         pytest.skip(f"this machine refuses SCHED_FIFO ({REALTIME_ERROR}); the pipeline ran at normal scheduling")
     for name in ("robot_state", "cartesian_controller", "trajectory_generator"):
         pid = irb120.pid(name)
-        policies = {int(tid.name): os.sched_getscheduler(int(tid.name)) for tid in Path(f"/proc/{pid}/task").iterdir()}
-        assert os.SCHED_FIFO in policies.values(), (name, policies)
+        threads = {}
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            scheduling = os.sched_getscheduler(int(task.name)), os.sched_getparam(int(task.name)).sched_priority
+            threads[int(task.name)] = ((task / "comm").read_text().strip(), scheduling)
+        # Fast DDS's receive threads: dds.shm.<port>, dds.udp.<port>.
+        receive = [scheduling for comm, scheduling in threads.values() if re.fullmatch(r"dds\.(shm|udp)\.\d+", comm)]
+        assert len(receive) >= 2 and set(receive) == {(os.SCHED_FIFO, 10)}, (name, threads)
+        assert threads[pid][1] == (os.SCHED_FIFO, 10), (name, threads)  # the main thread: the executor
+        # and the loop thread
+        assert sum(scheduling == (os.SCHED_FIFO, 10) for _, scheduling in threads.values()) >= 2 + len(receive)
 
 
 def test_irb120_line_tracked_along_the_segment(irb120):

@@ -98,7 +98,10 @@ class LoopingNode(Node):
             self.get_logger().warning(f"loop thread: {self.loop.realtime_error}")
         if self.loop.scheduler_slice_error:
             self.get_logger().info(f"loop thread: {self.loop.scheduler_slice_error}")
-        self.get_logger().info(f"loop at {rate_hz:g} Hz, thread scheduling: {self.loop.scheduling or 'unknown'}")
+        scheduling = self.loop.scheduling or "unknown"
+        if self.loop.shared_priority.priority:
+            scheduling += f", also given to {self.loop.shared_priority.describe()}"
+        self.get_logger().info(f"loop at {rate_hz:g} Hz, thread scheduling: {scheduling}")
 
     # --- what subclasses provide ---------------------------------------------------------------
 

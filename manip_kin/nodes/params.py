@@ -165,7 +165,8 @@ REALTIME_PRIORITY = ParamSpec(
     "realtime_priority",
     "int",
     0,
-    "SCHED_FIFO priority 1..99 of the loop thread (0 = normal scheduling; needs root/CAP_SYS_NICE)",
+    "SCHED_FIFO priority 1..99 of the loop thread and, while it runs, of the threads it waits on: "
+    "the executor's and the middleware's receive threads (0 = normal scheduling; needs root/CAP_SYS_NICE)",
     minimum=0,
 )
 

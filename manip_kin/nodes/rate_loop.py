@@ -48,9 +48,11 @@ __all__ = [
     "LoopStats",
     "PolledSubscription",
     "RateLoop",
+    "SharedPriority",
     "TIMER_SLACK_NS",
     "ThrottledLog",
     "set_timer_slack",
+    "share_realtime_priority",
     "stats_key_values",
 ]
 
@@ -167,6 +169,82 @@ def set_scheduler_slice(slice_ns: int) -> tuple[int, str]:
     return granted, ""
 
 
+def _is_middleware_receive_thread(name: str) -> bool:
+    """True for the name Fast DDS (2.13 and later) gives a thread that receives on one port:
+    ``dds.shm.<port>`` (shared memory) or ``dds.udp.<port>``."""
+    parts = name.split(".")
+    return len(parts) == 3 and parts[0] == "dds" and parts[1] in ("shm", "udp") and parts[2].isdigit()
+
+
+@dataclass(frozen=True)
+class SharedPriority:
+    """The threads :func:`share_realtime_priority` moved to SCHED_FIFO ``priority`` (thread ids)."""
+
+    priority: int
+    python_threads: tuple[int, ...] = ()
+    middleware_threads: tuple[int, ...] = ()
+
+    def describe(self) -> str:
+        """``1 Python thread and 5 middleware receive threads``, or why none were found."""
+        python, middleware = len(self.python_threads), len(self.middleware_threads)
+        text = f"{python} Python thread{'s' * (python != 1)} and {middleware} middleware receive thread"
+        text += "s" * (middleware != 1)
+        if not middleware:
+            text += " (none recognised: Fast DDS 2.13 or later names them dds.shm.<port>, dds.udp.<port>)"
+        return text
+
+    def restore(self) -> None:
+        """Normal scheduling again for each of the threads still at SCHED_FIFO ``priority``
+        (one that has ended, or was rescheduled since, is left alone)."""
+        for thread_id in self.python_threads + self.middleware_threads:
+            try:
+                if os.sched_getscheduler(thread_id) == os.SCHED_FIFO:
+                    if os.sched_getparam(thread_id).sched_priority == self.priority:
+                        os.sched_setscheduler(thread_id, os.SCHED_OTHER, os.sched_param(0))
+            except OSError:
+                continue
+
+
+def share_realtime_priority(priority: int) -> SharedPriority:
+    """Give SCHED_FIFO ``priority`` to the threads of this process that a real-time loop waits on.
+
+    A loop thread alone at SCHED_FIFO is held up by normal-priority threads whenever other
+    real-time loops keep the CPUs busy: by the middleware's receive threads, which deliver the
+    message that should wake it (a goal), and by the process's other Python threads, one of
+    which may hold the GIL the loop needs when it is preempted (priority inversion). So those
+    run at the loop's priority too: every other Python thread (``threading.enumerate``; the
+    executor's) and Fast DDS's receive threads, recognised by the names Fast DDS 2.13 and
+    later gives them (another middleware's threads are not). Only threads at normal
+    scheduling are changed; threads started later by one of them inherit its policy.
+    Measured in ``make bench`` (the README's speed section).
+
+    Needs the privilege SCHED_FIFO needs (CAP_SYS_NICE or an RLIMIT_RTPRIO): a thread that is
+    refused is skipped. :meth:`SharedPriority.restore` undoes it.
+    """
+    import glob
+
+    own = threading.get_native_id()
+    python_ids = {thread.native_id for thread in threading.enumerate()}
+    python_threads, middleware_threads = [], []
+    for task in glob.glob("/proc/self/task/*"):
+        thread_id = int(task.rsplit("/", 1)[1])
+        try:
+            if thread_id == own or os.sched_getscheduler(thread_id) != os.SCHED_OTHER:
+                continue
+            if thread_id in python_ids:
+                chosen = python_threads
+            else:
+                with open(f"{task}/comm") as comm:
+                    if not _is_middleware_receive_thread(comm.read().strip()):
+                        continue
+                chosen = middleware_threads
+            os.sched_setscheduler(thread_id, os.SCHED_FIFO, os.sched_param(priority))
+            chosen.append(thread_id)
+        except OSError:  # the thread ended meanwhile, or the kernel refused
+            continue
+    return SharedPriority(priority, tuple(python_threads), tuple(middleware_threads))
+
+
 class RateLoop:
     """Calls ``cycle(now_ns)`` every ``1 / rate_hz`` seconds in a dedicated thread.
 
@@ -178,7 +256,8 @@ class RateLoop:
         window: number of cycles kept for :meth:`stats`.
         realtime_priority: SCHED_FIFO priority (1..99) of the loop thread, or 0 for normal
             scheduling. Needs CAP_SYS_NICE (root); without it the loop runs normally and
-            :attr:`realtime_error` says why.
+            :attr:`realtime_error` says why. While the loop runs, the threads it waits on get
+            the same priority (:func:`share_realtime_priority`, :attr:`shared_priority`).
         scheduler_slice_ns: under normal scheduling, the EEVDF slice to request for the loop
             thread [ns] (see :func:`set_scheduler_slice`), or 0 for the kernel's default.
         wait: ``wait(timeout_ns) -> bool`` blocks until the next deadline and returns True
@@ -239,6 +318,8 @@ class RateLoop:
         self._thread: threading.Thread | None = None
         self.realtime_priority = int(realtime_priority)
         self.realtime_error = ""
+        #: The process's threads that run at the loop's SCHED_FIFO priority while it runs.
+        self.shared_priority = SharedPriority(0)
         self.scheduler_slice_ns = int(scheduler_slice_ns)
         #: Why the requested slice was not applied ("" when it was, or none was asked for).
         self.scheduler_slice_error = ""
@@ -265,14 +346,15 @@ class RateLoop:
         return self._thread is not None and self._thread.is_alive()
 
     def _configure_thread(self) -> None:
-        """Timer slack, SCHED_FIFO priority or else the EEVDF slice of the loop thread (it calls
-        this; each applies to the calling thread only: the executor thread keeps its scheduling)."""
+        """Timer slack, SCHED_FIFO priority (shared with the threads the loop waits on) or else
+        the EEVDF slice of the loop thread (it calls this)."""
         try:
             set_timer_slack(TIMER_SLACK_NS)
             if self.realtime_priority > 0:
                 try:
                     os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.realtime_priority))
                     self.scheduling = f"SCHED_FIFO {self.realtime_priority}"
+                    self.shared_priority = share_realtime_priority(self.realtime_priority)
                     return
                 except (OSError, AttributeError) as error:
                     self.realtime_error = f"SCHED_FIFO priority {self.realtime_priority} not set: {error}"
@@ -290,6 +372,12 @@ class RateLoop:
 
     def _run(self) -> None:
         self._configure_thread()
+        try:
+            self._run_cycles()
+        finally:
+            self.shared_priority.restore()
+
+    def _run_cycles(self) -> None:
         period = self.period_ns
         half = period // 2
         window = self._periods_ns.shape[0]

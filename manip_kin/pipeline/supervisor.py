@@ -145,8 +145,9 @@ def pipeline_processes(
         params_file: a ``--params-file`` given to every node. ROS resolves a key found in the
             file's node-name section before ``-p`` values (which act like ``/**`` entries), so
             the file wins for the keys it sets per node.
-        realtime_priority: SCHED_FIFO priority of every node's loop thread (0 = normal
-            scheduling); keeps the loops on time on a busy machine where permitted.
+        realtime_priority: SCHED_FIFO priority of every node's loop thread and the threads it
+            waits on (0 = normal scheduling); keeps the loops on time on a busy machine where
+            permitted.
         model_from_description: the controller and the generator read the model from
             robot_state's ``robot_description`` instead of a ``robot`` parameter.
     """
