@@ -101,7 +101,7 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0, kernel_defaul
     return rows
 
 
-def _latency_row(pipeline, label: str, priority: int, trials: int = 150) -> dict:
+def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.kinematics import pose_and_jacobian_in_base
