@@ -221,20 +221,18 @@ def share_realtime_priority(priority: int) -> SharedPriority:
     Needs the privilege SCHED_FIFO needs (CAP_SYS_NICE or an RLIMIT_RTPRIO): a thread that is
     refused is skipped. :meth:`SharedPriority.restore` undoes it.
     """
-    import glob
-
     own = threading.get_native_id()
     python_ids = {thread.native_id for thread in threading.enumerate()}
     python_threads, middleware_threads = [], []
-    for task in glob.glob("/proc/self/task/*"):
-        thread_id = int(task.rsplit("/", 1)[1])
+    for task in os.listdir("/proc/self/task"):
+        thread_id = int(task)
         try:
             if thread_id == own or os.sched_getscheduler(thread_id) != os.SCHED_OTHER:
                 continue
             if thread_id in python_ids:
                 chosen = python_threads
             else:
-                with open(f"{task}/comm") as comm:
+                with open(f"/proc/self/task/{task}/comm") as comm:
                     if not _is_middleware_receive_thread(comm.read().strip()):
                         continue
                 chosen = middleware_threads
