@@ -65,8 +65,8 @@ def test_realtime_priority_is_applied_where_permitted(irb120):
         receive = [scheduling for comm, scheduling in threads.values() if re.fullmatch(r"dds\.(shm|udp)\.\d+", comm)]
         assert len(receive) >= 2 and set(receive) == {(os.SCHED_FIFO, 10)}, (name, threads)
         assert threads[pid][1] == (os.SCHED_FIFO, 10), (name, threads)  # the main thread: the executor
-        # and the loop thread
-        assert sum(scheduling == (os.SCHED_FIFO, 10) for _, scheduling in threads.values()) >= 2 + len(receive)
+        at_priority = sum(scheduling == (os.SCHED_FIFO, 10) for _, scheduling in threads.values())
+        assert at_priority >= 2 + len(receive), (name, threads)  # with the loop thread
 
 
 def test_irb120_line_tracked_along_the_segment(irb120):
