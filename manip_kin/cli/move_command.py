@@ -191,7 +191,7 @@ def _await(args, client, stamp: str, start: float, payload: dict, summary: str) 
         return 2
     remaining = max(args.timeout - (time.monotonic() - start), 0.1)
     converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining, _CONTROLLER)
-    elapsed = time.monotonic() - start
+    elapsed = client.time_to_converge(generator.values["final_goal_stamp"], start, _CONTROLLER)
     errors = {key: _number(status, f"{key}_error") for key in ("joint", "position", "orientation")}
     payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
     verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s"

@@ -151,7 +151,7 @@ def _await_convergence(
 ) -> int:
     """Wait for the controller to report ``goal_stamp`` converged; report; 0 or 1."""
     converged, status = client.wait_converged(goal_stamp, timeout)
-    elapsed = time.monotonic() - start
+    elapsed = client.time_to_converge(goal_stamp, start)
     errors = _errors(status)
     payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
     verdict = (

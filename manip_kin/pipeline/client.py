@@ -149,6 +149,8 @@ class PipelineClient:
         self._executor.add_node(self.node)
         self._publishers: dict[str, object] = {}
         self._statuses: dict[str, Status] = {}
+        # When each (status name, goal stamp) was first reported converged [time.monotonic_ns()].
+        self._converged_ns: dict[tuple[str, str], int] = {}
         # The newest goal and line target this client sent, by topic (see _resend_unreported).
         self._newest_sent: dict[str, _SentTarget] = {}
         self.joint_state: JointState | None = None
@@ -214,6 +216,8 @@ class PipelineClient:
         for status in msg.status:
             entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now)
             self._statuses[status.name] = entry
+            if status.message == "converged" and (goal_stamp := entry.values.get("goal_stamp")):
+                self._converged_ns.setdefault((status.name, goal_stamp), now)
 
     def _on_joint_state(self, msg) -> None:
         self.joint_state = msg
@@ -295,8 +299,14 @@ class PipelineClient:
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
         publisher.publish(msg)
-        if not publisher.wait_for_all_acked(Duration(seconds=timeout)):
-            raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
+        # Fast DDS acknowledges at the writer's next periodic heartbeat, up to ~3 s later: keep
+        # spinning meanwhile, or the statuses of that time (a goal reached before its
+        # acknowledgement) would be taken in late, with late arrival times.
+        deadline = time.monotonic() + timeout
+        while not publisher.wait_for_all_acked(Duration(seconds=0)):
+            if time.monotonic() > deadline:
+                raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
+            self._executor.spin_once(timeout_sec=0.01)
         return publisher.get_subscription_count()
 
     def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
@@ -410,6 +420,13 @@ class PipelineClient:
 
         converged = bool(self.spin_until(done, timeout))
         return converged, last[0]
+
+    def time_to_converge(self, goal_stamp: str, start: float, controller: str = "cartesian_controller") -> float:
+        """Seconds from ``start`` (a ``time.monotonic()`` reading) until the controller first
+        reported ``converged`` on the goal stamped ``goal_stamp``; until now if it has not."""
+        converged_ns = self._converged_ns.get((self.status_name(controller), goal_stamp))
+        end = converged_ns * 1e-9 if converged_ns is not None else time.monotonic()
+        return end - start
 
     def _resend_unreported(self, topic: str, stamp: str, reported: str) -> None:
         """Publish a goal or line target of ours again when its node has not reported it.
