@@ -149,8 +149,8 @@ class PipelineClient:
         self._executor.add_node(self.node)
         self._publishers: dict[str, object] = {}
         self._statuses: dict[str, Status] = {}
-        # When each (status name, goal stamp) was first reported converged [time.monotonic_ns()].
-        self._converged_ns: dict[tuple[str, str], int] = {}
+        # The first status of each (status name, goal stamp) that said converged.
+        self._first_converged: dict[tuple[str, str], Status] = {}
         # The newest goal and line target this client sent, by topic (see _resend_unreported).
         self._newest_sent: dict[str, _SentTarget] = {}
         self.joint_state: JointState | None = None
@@ -217,7 +217,7 @@ class PipelineClient:
             entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now)
             self._statuses[status.name] = entry
             if status.message == "converged" and (goal_stamp := entry.values.get("goal_stamp")):
-                self._converged_ns.setdefault((status.name, goal_stamp), now)
+                self._first_converged.setdefault((status.name, goal_stamp), entry)
 
     def _on_joint_state(self, msg) -> None:
         self.joint_state = msg
@@ -404,8 +404,8 @@ class PipelineClient:
         """Wait until the controller reports ``converged`` on the goal stamped ``goal_stamp``.
 
         Returns:
-            ``(converged, last status about that goal)``; the status has ``position_error``
-            [m] and ``orientation_error`` [rad].
+            ``(converged, status)``: the first status that said converged on that goal, else
+            the last one about it; it has ``position_error`` [m] and ``orientation_error`` [rad].
         """
         last: list[Status | None] = [None]
         key = self.status_name(controller)
@@ -416,7 +416,10 @@ class PipelineClient:
                 self._resend_unreported("goal_pose", goal_stamp, status.values.get("goal_stamp", "") if status else "")
                 return False
             last[0] = status
-            return status.message == "converged"
+            if status.message != "converged":
+                return False
+            last[0] = self._first_converged.get((key, goal_stamp), status)
+            return True
 
         converged = bool(self.spin_until(done, timeout))
         return converged, last[0]
@@ -424,9 +427,8 @@ class PipelineClient:
     def time_to_converge(self, goal_stamp: str, start: float, controller: str = "cartesian_controller") -> float:
         """Seconds from ``start`` (a ``time.monotonic()`` reading) until the controller first
         reported ``converged`` on the goal stamped ``goal_stamp``; until now if it has not."""
-        converged_ns = self._converged_ns.get((self.status_name(controller), goal_stamp))
-        end = converged_ns * 1e-9 if converged_ns is not None else time.monotonic()
-        return end - start
+        first = self._first_converged.get((self.status_name(controller), goal_stamp))
+        return (first.received_ns * 1e-9 if first is not None else time.monotonic()) - start
 
     def _resend_unreported(self, topic: str, stamp: str, reported: str) -> None:
         """Publish a goal or line target of ours again when its node has not reported it.
