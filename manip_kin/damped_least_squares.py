@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.errors import NonFiniteError
-from manip_kin.unrolled_linalg import damped_solver, smallest_eigenvalue_bound
+from manip_kin.unrolled_linalg import bound_group_sizes, damped_solver, smallest_eigenvalue_bound
 
 
 def damping_sq(sigma_min_sq: float, threshold_sq: float, damping_max_sq: float) -> float:
@@ -129,7 +129,7 @@ class DampedSolver:
     def __init__(self, chain: Callable, dof: int, rows: Sequence[int]):
         self.dof = dof
         self.rows = tuple(rows)
-        self._angular_rows = sum(1 for r in self.rows if r < 3)  # the bound's group sizes
+        self._group_sizes = bound_group_sizes(self.rows)
         #: ``shifted(values, b, d)``: the raw unrolled solve with a given ``d = λ²`` (see
         #: :func:`manip_kin.unrolled_linalg.damped_solver`), or None when not positive definite.
         self.shifted = damped_solver(chain, dof, self.rows, inverse_trace=True, fold_constants=False)
@@ -142,8 +142,8 @@ class DampedSolver:
         """True when an unshifted solve's ``(x, det, tr_angular, tr_linear, tr⁻¹)`` proves
         σ_min² >= ``threshold_sq``."""
         _, determinant, trace_angular, trace_linear, inverse_trace = result
-        angular = self._angular_rows
-        bound = smallest_eigenvalue_bound(determinant, trace_angular, angular, trace_linear, len(self.rows) - angular)
+        angular, linear = self._group_sizes
+        bound = smallest_eigenvalue_bound(determinant, trace_angular, angular, trace_linear, linear)
         if bound >= threshold_sq:
             return True
         return inverse_trace * threshold_sq <= 1.0

@@ -39,6 +39,7 @@ from manip_kin.unrolled_linalg import (
     _inverse_trace_lines,
     _product,
     _sum,
+    bound_group_sizes,
     chain_constants,
     damped_solve_lines,
     jacobian_entries,
@@ -191,8 +192,8 @@ def step_source(
     # traces (unrolled_linalg.smallest_eigenvalue_bound, inlined), else by 1/tr((JJᵀ)⁻¹)
     # (within a factor m of λ_min, a few more flops).
     lines.append("        MANIPULABILITY = sqrt(DET)")
-    angular = sum(1 for r in rows if r < 3)
-    arguments = ["DET", "TA", str(angular), "TL", str(m - angular)]
+    angular, linear = bound_group_sizes(rows)
+    arguments = ["DET", "TA", str(angular), "TL", str(linear)]
     lines += inline_lines(smallest_eigenvalue_bound, arguments, ["BOUND"], "EB_", "        ")
     if m > 1:
         # λ_min <= every Cholesky pivot (a pivot is a Schur complement, and eigenvalues

@@ -73,6 +73,13 @@ def _determinant_and_traces(rows: Sequence[int], shifted: bool = True) -> str:
     return "*".join(f"p{j}" for j in range(m)) + f", {' + '.join(angular) or '0.0'}, {' + '.join(linear) or '0.0'}"
 
 
+def bound_group_sizes(rows: Sequence[int]) -> tuple[int, int]:
+    """The group sizes :func:`smallest_eigenvalue_bound` takes for ``J Jᵀ`` of task ``rows``
+    (components 0-5 = rx, ry, rz, x, y, z): ``(angular rows, linear rows)``."""
+    angular = sum(1 for r in rows if r < 3)
+    return angular, len(rows) - angular
+
+
 def smallest_eigenvalue_bound(determinant: float, trace_a: float, size_a: int, trace_b: float, size_b: int) -> float:
     """A lower bound of the smallest eigenvalue of a symmetric positive semi-definite matrix A.
 
