@@ -1,10 +1,12 @@
-"""Helpers for tests that run node processes: checked teardown and the realtime privilege."""
+"""Helpers for tests that run node processes: checked teardown, the realtime privilege, threads."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import threading
+from pathlib import Path
 
 from manip_kin.pipeline import Pipeline
 
@@ -59,3 +61,12 @@ def thread_slice_ns(native_id: int) -> int | None:
         if line.startswith("se.slice"):
             return int(line.split(":")[1])
     return None
+
+
+def fast_dds_receive_threads(pid: int | str = "self") -> list[int]:
+    """Thread ids of process ``pid``'s Fast DDS receive threads (named dds.shm.<port>, dds.udp.<port>)."""
+    return [
+        int(task.name)
+        for task in Path(f"/proc/{pid}/task").iterdir()
+        if re.fullmatch(r"dds\.(shm|udp)\.\d+", (task / "comm").read_text().strip())
+    ]

@@ -9,10 +9,8 @@ ignored it.
 
 import math
 import os
-import re
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -357,7 +355,7 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
     """realtime_priority needs CAP_SYS_NICE (or an RLIMIT_RTPRIO): where this machine refuses it,
     the loop runs normally and says why in realtime_error; where it permits it, the loop thread
     is SCHED_FIFO (read back from the kernel)."""
-    from pipeline_checks import realtime_scheduling_error
+    from pipeline_checks import fast_dds_receive_threads, realtime_scheduling_error
 
     refused = realtime_scheduling_error(10)
     node, commands, _ = _start(harness, realtime_priority=10)
@@ -371,7 +369,7 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
         # The threads it waits on run at its priority while it runs: this (the executor's) thread,
         # which may hold the GIL, and the middleware's receive threads (Fast DDS: dds.shm.<port>).
         main = threading.get_native_id()
-        receive = _fast_dds_receive_threads()
+        receive = fast_dds_receive_threads()
         assert len(receive) >= 2, receive
         for thread_id in [main, *receive]:
             assert os.sched_getscheduler(thread_id) == os.SCHED_FIFO, thread_id
@@ -382,15 +380,6 @@ def test_realtime_priority_reports_whether_it_was_applied(harness):
         for thread_id in [main, *receive]:
             assert os.sched_getscheduler(thread_id) == os.SCHED_OTHER, thread_id
     assert harness.spin_until(lambda: len(commands) > 5, 5)  # it runs either way
-
-
-def _fast_dds_receive_threads() -> list[int]:
-    """This process's Fast DDS receive threads (named dds.shm.<port>, dds.udp.<port>)."""
-    found = []
-    for task in Path("/proc/self/task").iterdir():
-        if re.fullmatch(r"dds\.(shm|udp)\.\d+", (task / "comm").read_text().strip()):
-            found.append(int(task.name))
-    return found
 
 
 def test_scheduler_slice_parameter_reaches_the_loop_thread_and_its_status(harness):

@@ -5,7 +5,6 @@ Its own module so that its pipeline never shares the machine with test_pipeline.
 
 import math
 import os
-import re
 import subprocess
 import sysconfig
 from pathlib import Path
@@ -13,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from pipeline_checks import realtime_scheduling_error, stop_checked
+from pipeline_checks import fast_dds_receive_threads, realtime_scheduling_error, stop_checked
 
 from manip_kin.nodes import conversions as conv
 from manip_kin.pipeline import Pipeline, fresh_domain_env, pipeline_processes
@@ -61,8 +60,7 @@ def test_realtime_priority_is_applied_where_permitted(irb120):
         for task in Path(f"/proc/{pid}/task").iterdir():
             scheduling = os.sched_getscheduler(int(task.name)), os.sched_getparam(int(task.name)).sched_priority
             threads[int(task.name)] = ((task / "comm").read_text().strip(), scheduling)
-        # Fast DDS's receive threads: dds.shm.<port>, dds.udp.<port>.
-        receive = [scheduling for comm, scheduling in threads.values() if re.fullmatch(r"dds\.(shm|udp)\.\d+", comm)]
+        receive = [threads[thread_id][1] for thread_id in fast_dds_receive_threads(pid)]
         assert len(receive) >= 2 and set(receive) == {(os.SCHED_FIFO, 10)}, (name, threads)
         assert threads[pid][1] == (os.SCHED_FIFO, 10), (name, threads)  # the main thread: the executor
         at_priority = sum(scheduling == (os.SCHED_FIFO, 10) for _, scheduling in threads.values())
