@@ -47,6 +47,11 @@ TARGETS = {
 REFERENCE = "MoveIt Servo default cycle 10 ms; one rclpy timer ~0.3 ms p99 at 1 kHz; JointState IPC ~0.2 ms p50"
 
 
+def _samples(values: list) -> np.ndarray:
+    """``values`` as an array, or one NaN when there are none (a row then says so, not raises)."""
+    return np.array(values) if len(values) else np.array([math.nan])
+
+
 def _cpu_seconds(pid: int) -> float:
     fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -177,11 +182,11 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict
         if priority:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
             shared.restore()
-    values = np.array(latencies) if latencies else np.array([math.nan])
+    values = _samples(latencies)
     # Where the time goes: goal published -> the command published by the controller (one hop
     # and the reaction) -> in this process's middleware (the second hop) -> seen here (polling).
-    published_values = np.array(published) if published else np.array([math.nan])
-    received_values = np.array(received) if received else np.array([math.nan])
+    published_values = _samples(published)
+    received_values = _samples(received)
     return {
         "metric": f"goal-to-first-reacting-command latency, {label}",
         "p50_ms": float(np.percentile(values, 50)),
@@ -267,7 +272,7 @@ def _round_trip_row(trials: int = 300, label: str = "idle machine") -> dict:
         except subprocess.TimeoutExpired:
             echo.kill()
             echo.wait()
-    values = np.array(latencies) if latencies else np.array([math.nan])
+    values = _samples(latencies)
     return {
         "metric": f"inter-process round trip (ping to a Python process and back), no work in between, {label}",
         "p50_ms": float(np.percentile(values, 50)),
