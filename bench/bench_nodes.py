@@ -345,7 +345,7 @@ def _line_row(rate_hz: float, priority: int) -> dict:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from manip_kin.nodes.conversions import pose_stamped_to_matrix
-    from manip_kin.pipeline import Pipeline, pipeline_processes
+    from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, pipeline_processes
     from manip_kin.rotations import make_transform, rpy_to_matrix
     from manip_kin.trajectory import distance_to_segment
 
@@ -356,7 +356,7 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
+        generator=IRB120_LINE_GENERATOR,
         realtime_priority=priority,
     )
     label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")

@@ -97,7 +97,13 @@ class JointStateCounter:
 def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, out_dir: Path) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from manip_kin.pipeline import NodeProcess, Pipeline, ensure_ros_isolation, pipeline_processes
+    from manip_kin.pipeline import (
+        IRB120_LINE_GENERATOR,
+        NodeProcess,
+        Pipeline,
+        ensure_ros_isolation,
+        pipeline_processes,
+    )
     from manip_kin.rotations import make_transform, rpy_to_matrix
 
     env = ensure_ros_isolation()
@@ -107,7 +113,7 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
+        generator=IRB120_LINE_GENERATOR,
     )
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
     poses = [make_transform(down, LINE_START), make_transform(down, LINE_END)]

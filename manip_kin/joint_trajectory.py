@@ -24,7 +24,14 @@ Between two points ``(t_i, q_i, v_i)`` and ``(t_{i+1}, q_{i+1}, v_{i+1})``, with
 Without velocities every point is passed at rest. The last point must be at rest (the
 generator holds it). Every point must lie within the joint limits, and no joint may need
 more than its velocity limit anywhere (checked on 64 samples per segment and at the
-polynomials' peak): a trajectory that breaks a limit is rejected with the reason.
+polynomials' peak), nor more than its acceleration limit, nor (on a segment from rest to
+rest) its jerk limit: a trajectory that breaks a limit is rejected with the reason. A single
+point at ``time_from_start`` 0 means "as soon as the limits allow" (:func:`move_duration`).
+
+Jerk: the quintic's is ``60 |Δq| / h³`` at its ends and bounded everywhere; the cubic and the
+trapezoid step their acceleration at the ends of a segment (and the trapezoid at its corners),
+so only their interior jerk (``12 |Δq| / h³``, and 0) is checked: the controller's command
+filter (:mod:`manip_kin.command_filter`) rounds those steps off within the jerk limit.
 
 Plain numpy: no ROS here.
 """
@@ -38,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.joint_limits import JointLimits
 from manip_kin.model import RobotModel
 from manip_kin.trajectory import TimeScaling
 
@@ -45,6 +53,11 @@ JOINT_TIME_SCALINGS = ("cubic", "quintic", "trapezoidal")
 
 #: Peak ``ds/dτ`` of each scaling: the fastest joint moves at this times its mean speed.
 PEAK_RATE = {"cubic": 1.5, "quintic": 1.875, "trapezoidal": 1.5}
+#: Peak ``|d²s/dτ²|``: cubic 6 − 12τ at the ends, quintic 60τ − 180τ² + 120τ³ at τ = (3 ∓ √3)/6,
+#: trapezoid 1.5 / (1/3) while it ramps.
+PEAK_ACCELERATION = {"cubic": 6.0, "quintic": 10.0 / math.sqrt(3.0), "trapezoidal": 4.5}
+#: Peak ``|d³s/dτ³|`` inside a segment (see the module docstring for the ends).
+PEAK_JERK = {"cubic": 12.0, "quintic": 60.0, "trapezoidal": 0.0}
 
 #: Shortest duration :func:`move_duration` returns [s] (a move of zero length still takes a moment).
 MIN_MOVE_DURATION = 0.1
@@ -158,17 +171,50 @@ def _peak_speeds(plan: JointTrajectoryPlan) -> np.ndarray:
     return peaks
 
 
-def check_velocity_limits(model: RobotModel, plan: JointTrajectoryPlan) -> None:
-    """Raise :class:`InvalidArgumentError` when some joint needs more than its velocity limit."""
-    ratios = _peak_speeds(plan) / model.velocity_limits
+def _peak_accelerations(plan: JointTrajectoryPlan) -> tuple[np.ndarray, np.ndarray]:
+    """Largest ``|q̈|`` and ``|q⃛|`` per segment and joint, shapes (K, n).
+
+    Exact for a segment at rest at both ends (``PEAK_ACCELERATION · |Δq| / h²``,
+    ``PEAK_JERK · |Δq| / h³``); with velocities, the acceleration from 128 finite differences
+    of the sampled velocity, and the jerk not checked (0).
+    """
+    count = plan.positions.shape[1]
+    accelerations, jerks = np.zeros((plan.point_count, count)), np.zeros((plan.point_count, count))
+    for i in range(plan.point_count):
+        h = float(plan.times[i + 1] - plan.times[i])
+        delta = np.abs(plan.positions[i + 1] - plan.positions[i])
+        if plan.scaling != "trapezoidal" and (plan.velocities[i].any() or plan.velocities[i + 1].any()):
+            t0 = float(plan.times[i])
+            speeds = np.array([plan.sample(t0 + tau * h)[1] for tau in np.linspace(0.0, 1.0, 129)])
+            accelerations[i] = np.max(np.abs(np.diff(speeds, axis=0)), axis=0) / (h / 128)
+        else:
+            accelerations[i] = PEAK_ACCELERATION[plan.scaling] * delta / h**2
+            jerks[i] = PEAK_JERK[plan.scaling] * delta / h**3
+    return accelerations, jerks
+
+
+def _check_peaks(model: RobotModel, plan: JointTrajectoryPlan, peaks: np.ndarray, limit, quantity: str, unit: str):
+    ratios = peaks / np.asarray(limit)
     segment, joint = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
     if ratios[segment, joint] > 1.0 + _VELOCITY_TOLERANCE:
-        unit = "rad/s" if model.joints[joint].is_revolute else "m/s"
+        base = "rad" if model.joints[joint].is_revolute else "m"
         raise InvalidArgumentError(
             f"point {segment + 1} (at {plan.times[segment + 1]:g} s) is reached too fast: joint "
-            f"'{model.joint_names[joint]}' needs {ratios[segment, joint] * model.velocity_limits[joint]:.4g} {unit}, "
-            f"its limit is {model.velocity_limits[joint]:g} {unit}; valid: later time_from_start"
+            f"'{model.joint_names[joint]}' needs {peaks[segment, joint]:.4g} {base}{unit} of {quantity}, "
+            f"its limit is {limit[joint]:g} {base}{unit}; valid: later time_from_start"
         )
+
+
+def check_limits(model: RobotModel, plan: JointTrajectoryPlan, limits: JointLimits | None = None) -> None:
+    """Raise :class:`InvalidArgumentError` when some joint needs more than its velocity limit
+    (the model's, or the lower of it and ``limits``), or more than the acceleration or jerk
+    limit of ``limits``."""
+    velocity = model.velocity_limits if limits is None else np.minimum(model.velocity_limits, limits.velocity)
+    _check_peaks(model, plan, _peak_speeds(plan), velocity, "speed", "/s")
+    if limits is not None:
+        accelerations, jerks = _peak_accelerations(plan)
+        _check_peaks(model, plan, accelerations, limits.acceleration, "acceleration", "/s²")
+        _check_peaks(model, plan, jerks, limits.jerk, "jerk", "/s³")
 
 
 @dataclass(frozen=True)
@@ -209,6 +255,7 @@ def plan_joint_trajectory(
     joint_names: Sequence[str],
     points: Sequence[TrajectoryPoint],
     scaling: str = "cubic",
+    limits: JointLimits | None = None,
 ) -> JointTrajectoryPlan:
     """Check a trajectory against the model and plan it from ``q_start`` at rest.
 
@@ -218,6 +265,8 @@ def plan_joint_trajectory(
         joint_names: the trajectory's joint names (any order; every model joint, each once).
         points: the points, times strictly increasing and > 0.
         scaling: one of :data:`JOINT_TIME_SCALINGS`.
+        limits: velocity, acceleration and jerk limits to check as well (None: the model's
+            velocity limits only). One point at time 0 is timed by :func:`move_duration`.
 
     Raises:
         InvalidArgumentError: with the reason (names, times, counts, non-finite values,
@@ -230,8 +279,11 @@ def plan_joint_trajectory(
         raise InvalidArgumentError("trajectory has no points; valid: at least one point")
     count = len(order)
     times, positions, velocities = [0.0], [q_start], [np.zeros(count)]
+    as_soon_as_possible = len(points) == 1 and float(points[0].time_from_start) == 0.0 and not len(points[0].velocities)
     for k, point in enumerate(points, start=1):
         time = float(point.time_from_start)
+        if as_soon_as_possible:
+            time = move_duration(model, q_start, np.asarray(point.positions, dtype=float)[order], scaling, limits)
         if not (math.isfinite(time) and time > times[-1]):
             previous = "0 (the start)" if k == 1 else f"point {k - 1}'s {times[-1]:g} s"
             raise InvalidArgumentError(
@@ -266,16 +318,29 @@ def plan_joint_trajectory(
             "trapezoidal scaling stops at every point; valid: points without velocities, or cubic/quintic scaling"
         )
     plan = JointTrajectoryPlan(np.array(times), np.array(positions), np.array(velocities), scaling)
-    check_velocity_limits(model, plan)
+    check_limits(model, plan, limits)
     return plan
 
 
-def move_duration(model: RobotModel, q_start, q_goal, scaling: str = "cubic") -> float:
-    """Shortest duration [s] of a move from ``q_start`` to ``q_goal`` (both at rest) within the velocity limits.
+def move_duration(
+    model: RobotModel, q_start, q_goal, scaling: str = "cubic", limits: JointLimits | None = None
+) -> float:
+    """Shortest duration [s] of a move from ``q_start`` to ``q_goal`` (both at rest) within the limits.
 
-    The slowest joint sets it: ``T = PEAK_RATE · max_j |Δq_j| / v_max_j``, at least
+    The slowest joint sets it: ``T = max(PEAK_RATE·|Δq|/v, sqrt(PEAK_ACCELERATION·|Δq|/A),
+    cbrt(PEAK_JERK·|Δq|/J))`` over the joints (velocity only without ``limits``), at least
     :data:`MIN_MOVE_DURATION`.
     """
     _check_scaling(scaling)
     delta = np.abs(model.check_q(q_goal, "q_goal") - model.check_q(q_start, "q_start"))
-    return max(PEAK_RATE[scaling] * float(np.max(delta / model.velocity_limits)), MIN_MOVE_DURATION)
+    if limits is None:
+        return max(PEAK_RATE[scaling] * float(np.max(delta / model.velocity_limits)), MIN_MOVE_DURATION)
+    velocity = np.minimum(model.velocity_limits, limits.velocity)
+    duration = max(
+        PEAK_RATE[scaling] * float(np.max(delta / velocity)),
+        math.sqrt(PEAK_ACCELERATION[scaling] * float(np.max(delta / limits.acceleration))),
+        math.cbrt(PEAK_JERK[scaling] * float(np.max(delta / limits.jerk))),
+        MIN_MOVE_DURATION,
+    )
+    # The check allows a relative 1e-6 over each limit: stay inside it after rounding.
+    return duration * (1.0 + 1e-9)

@@ -76,6 +76,18 @@ class ControllerState(StrEnum):
     SINGULAR = "singular"
     JOINT_LIMITED = "joint-limited"
     STALE_INPUT = "stale input"
+    UNREACHABLE = "unreachable"
+    PAUSED = "paused"
+    STOPPED = "stopped"
+
+
+#: States in which the commands come to rest and stay there (the law does not run).
+HALTED_STATES = (ControllerState.UNREACHABLE, ControllerState.PAUSED, ControllerState.STOPPED)
+
+#: Unreachable: over this long [s] of a resting goal, the task error fell by less than
+#: :data:`PROGRESS_FRACTION` of itself while the arm was singular or at joint limits.
+PROGRESS_WINDOW_S = 0.5
+PROGRESS_FRACTION = 0.02
 
 
 class GoalKind(StrEnum):
@@ -106,11 +118,13 @@ class ControllerSupervisorConfig:
     orientation_tolerance: float = 1e-3
     joint_tolerance: float = 1e-3
     task: Task = FULL_TASK
+    progress_window: float = PROGRESS_WINDOW_S
 
     def __post_init__(self):
         _check_seconds("joint_state_timeout", self.joint_state_timeout)
         _check_seconds("goal_timeout", self.goal_timeout, allow_zero=True)
         _check_seconds("goal_twist_timeout", self.goal_twist_timeout)
+        _check_seconds("progress_window", self.progress_window)
         for name in ("position_tolerance", "orientation_tolerance", "joint_tolerance"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -133,6 +147,40 @@ class JointStepOutput(Protocol):
 
     joint_error: np.ndarray
     limited_joints: tuple[int, ...]
+
+
+class ProgressMonitor:
+    """Whether the task error still falls: the unreachable-goal detector.
+
+    Every :attr:`window_ns` it compares the task's position and orientation errors with those
+    at the window's start; a window in which neither fell by :data:`PROGRESS_FRACTION` (the
+    components already within tolerance not counted) is a stall. Exponential convergence at
+    gain K falls by ``1 - exp(-K T)`` a window (33 % at K = 0.8 1/s, T = 0.5 s), so a stall is
+    not slow progress.
+    """
+
+    def __init__(self, window_ns: int):
+        self.window_ns = int(window_ns)
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the history (a new goal, a moving goal, a resumed motion)."""
+        self._start_ns: int | None = None
+        self._start_errors = (0.0, 0.0)
+
+    def stalled(self, now_ns: int, errors: tuple[float, float], tolerances: tuple[float, float]) -> bool:
+        """True when the window that ends now made no progress (then a new window starts)."""
+        if self._start_ns is None:
+            self._start_ns, self._start_errors = now_ns, errors
+            return False
+        if now_ns - self._start_ns < self.window_ns:
+            return False
+        progress = any(
+            start > tolerance and error < (1.0 - PROGRESS_FRACTION) * start
+            for error, start, tolerance in zip(errors, self._start_errors, tolerances)
+        )
+        self._start_ns, self._start_errors = now_ns, errors
+        return not progress
 
 
 class ControllerSupervisor:
@@ -164,6 +212,10 @@ class ControllerSupervisor:
         self._twist_time_ns: int | None = None
         self._twist_moving = False
         self._reference_moving = False
+        self.progress = ProgressMonitor(int(config.progress_window * 1e9))
+        #: The errors when the goal was found unreachable: ``(position [m], orientation [rad])``.
+        self.unreachable_errors: tuple[float, float] | None = None
+        self._paused = False
 
     def reconfigure(self, config: ControllerSupervisorConfig, diagnostics_period_ns: int) -> None:
         """New timeouts, tolerances and status period from the next cycle on (live tuning); the
@@ -173,6 +225,7 @@ class ControllerSupervisor:
         self._twist_timeout_ns = int(config.goal_twist_timeout * 1e9)
         self.config = config
         self.throttle.period_ns = int(diagnostics_period_ns)
+        self.progress.window_ns = int(config.progress_window * 1e9)
 
     # --- events ------------------------------------------------------------------------------
 
@@ -188,6 +241,30 @@ class ControllerSupervisor:
         self.goal_kind = GoalKind(kind)
         self._goal_time_ns = now_ns
         self._reference_moving = bool(moving) and self.goal_kind is GoalKind.JOINT
+        self.progress.restart()
+        self.unreachable_errors = None
+        if self.state in (ControllerState.UNREACHABLE, ControllerState.STOPPED):
+            self._set(ControllerState.TRACKING, "new goal")
+
+    def stop_requested(self) -> None:
+        """``~/stop``: the goal is dropped and the commands come to rest; a new goal starts again."""
+        self.goal_kind = None
+        self._paused = False
+        self._set(ControllerState.STOPPED, "stopped on request; the goal was dropped")
+
+    def pause_requested(self, pause: bool) -> None:
+        """``~/pause``: hold still (``True``) with the goal kept, or resume it (``False``)."""
+        self._paused = bool(pause)
+        if pause:
+            self._set(ControllerState.PAUSED, "paused on request; resume to go on")
+        elif self.state is ControllerState.PAUSED:
+            self.progress.restart()
+            self._set(ControllerState.TRACKING, "resumed")
+
+    @property
+    def paused(self) -> bool:
+        """True between a pause and a resume."""
+        return self._paused
 
     def twist_received(self, now_ns: int, moving: bool) -> None:
         """A valid feed-forward twist arrived (``moving``: not all zero)."""
@@ -197,7 +274,13 @@ class ControllerSupervisor:
     # --- the cycle -----------------------------------------------------------------------------
 
     def gate(self, now_ns: int) -> bool:
-        """True when a control step should run; otherwise the state says why not (publish zeros)."""
+        """True when a control step should run; otherwise the state says why not, and the
+        commands come to rest."""
+        if self._paused:
+            self._set(ControllerState.PAUSED, "paused on request; resume to go on")
+            return False
+        if self.state in (ControllerState.UNREACHABLE, ControllerState.STOPPED):
+            return False  # until a new goal
         if self._q_time_ns is None:
             self._set(ControllerState.STALE_INPUT, "no joint state yet")
         elif now_ns - self._q_time_ns > self._joint_state_timeout_ns:
@@ -224,25 +307,47 @@ class ControllerSupervisor:
         """The control step raised: zeros go out."""
         self._set(ControllerState.STALE_INPUT, f"control step failed: {error}")
 
-    def pose_step_done(self, output: PoseStepOutput, feed_forward_used: bool) -> None:
+    def pose_step_done(
+        self, output: PoseStepOutput, feed_forward_used: bool, now_ns: int = 0, braking_joints: Sequence[int] = ()
+    ) -> None:
         """Classify a pose step. Converged only while the goal is not moving (no feed-forward
-        motion), counting the task's error components only."""
+        motion), counting the task's error components only. A resting goal whose error stops
+        falling (:class:`ProgressMonitor`) while the arm is singular or at joint limits (held
+        by the law, or braked before one: ``braking_joints``) is unreachable."""
         orientation_error, position_error = self.config.task.error_norms(
             output.orientation_error, output.position_error
         )
         goal_moving = feed_forward_used and self._twist_moving
+        limited = sorted(set(output.limited_joints) | set(braking_joints))
+        tolerances = (self.config.position_tolerance, self.config.orientation_tolerance)
         if (
             not goal_moving
             and position_error <= self.config.position_tolerance
             and orientation_error <= self.config.orientation_tolerance
         ):
+            self.progress.restart()
             self._set(ControllerState.CONVERGED, "goal reached within tolerance")
+        elif goal_moving:
+            self.progress.restart()
+            self._classify_limits(limited, "moving towards the goal")
+        elif self.progress.stalled(now_ns, (position_error, orientation_error), tolerances) and (
+            output.singular or limited
+        ):
+            self.unreachable_errors = (position_error, orientation_error)
+            if limited:
+                why = f"joints at their limits: {', '.join(self.joint_names[i] for i in limited)}"
+            else:
+                why = f"stretched and singular (manipulability {output.manipulability:.3g})"
+            self._set(
+                ControllerState.UNREACHABLE,
+                f"goal out of reach, {why}; closest: {position_error:.4g} m, {orientation_error:.4g} rad away",
+            )
         elif output.singular:
             self._set(
                 ControllerState.SINGULAR, f"manipulability {output.manipulability:.3g}, damping {output.damping:.3g}"
             )
         else:
-            self._classify_limits(output.limited_joints, "moving towards the goal")
+            self._classify_limits(limited, "moving towards the goal")
 
     def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool) -> None:
         """Classify a joint tracking step: converged when the reference rests (or its velocity
@@ -268,12 +373,13 @@ class ControllerSupervisor:
     @property
     def active(self) -> bool:
         """True when the last cycle ran a control step (errors and limits are meaningful)."""
-        return self.state not in (ControllerState.IDLE, ControllerState.STALE_INPUT)
+        return self.state not in (ControllerState.IDLE, ControllerState.STALE_INPUT, *HALTED_STATES)
 
     @property
     def level(self) -> str:
         """Diagnostic level of the state: ``ok`` or ``warn``."""
-        return "warn" if self.state in (ControllerState.STALE_INPUT, ControllerState.SINGULAR) else "ok"
+        warn = (ControllerState.STALE_INPUT, ControllerState.SINGULAR, ControllerState.UNREACHABLE)
+        return "warn" if self.state in warn else "ok"
 
     def _set(self, state: ControllerState, detail: str) -> None:
         self.state = state

@@ -310,6 +310,8 @@ class ReachReport:
         orientation_error: residual orientation error there [rad] (0 if reachable).
         q_end: joint positions at the last reached sample, shape (n,).
         reason: one line for a log ("" when reachable).
+        progress: the progress of each reached sample, shape (K,).
+        path: the joint positions at each reached sample, shape (K, n).
     """
 
     reachable: bool
@@ -318,6 +320,8 @@ class ReachReport:
     orientation_error: float
     q_end: np.ndarray
     reason: str = ""
+    progress: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    path: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def check_line_reachable(
@@ -368,6 +372,7 @@ def check_line_reachable(
     task_of = parse_task(task, model)
     rows = list(task_of.rows)
     last_reached = 0.0
+    path = []
     for s in np.linspace(0.0, 1.0, count):
         target = line.pose_at(float(s))
         position_error = orientation_error = math.inf
@@ -393,7 +398,8 @@ def check_line_reachable(
             )
             return ReachReport(False, last_reached, position_error, orientation_error, q, reason)
         last_reached = float(s)
-    return ReachReport(True, 1.0, 0.0, 0.0, q)
+        path.append(q.copy())
+    return ReachReport(True, 1.0, 0.0, 0.0, q, "", np.linspace(0.0, 1.0, count), np.array(path))
 
 
 def _why_stuck(model: RobotModel, data: KinematicsData, frame_index: int, q: np.ndarray, rows: list[int]) -> str:

@@ -8,7 +8,10 @@ Like ``robot_state_publisher`` + ros2_control's fake hardware with a
   that is not part of any arm chain, in a fixed order of its own;
 * integrates the velocities of ``/forward_velocity_controller/commands``
   (std_msgs/Float64MultiArray, one value per arm joint in its ``joints`` order) and holds
-  still when no command is fresh.
+  still when no command is fresh; with ``command_timeout=math.inf`` it holds the last
+  command forever, as JointGroupVelocityController does (the arm keeps moving on it).
+
+Every command received is kept with its arrival time (:attr:`commands`).
 
 The arm joints are read from the URDF here (every revolute/prismatic joint, file order), not
 from manip_kin. It runs in its own rclpy context and spins in a thread of its own.
@@ -44,20 +47,32 @@ class FakeHardware:
         urdf_text: the URDF it publishes.
         q0: start positions of the arm joints (URDF order).
         rate_hz: integration and joint-state rate [Hz].
-        command_timeout: a command older than this counts as zero [s].
+        command_timeout: a command older than this counts as zero [s] (math.inf: held forever).
+        command_topic: where the commands come from.
     """
 
-    def __init__(self, urdf_text: str, q0, rate_hz: float = 200.0, command_timeout: float = 0.1):
+    def __init__(
+        self,
+        urdf_text: str,
+        q0,
+        rate_hz: float = 200.0,
+        command_timeout: float = 0.1,
+        command_topic: str = COMMAND_TOPIC,
+    ):
         self.joint_names = urdf_arm_joints(urdf_text)
         self.q = np.array(q0, dtype=float)
         assert self.q.shape == (len(self.joint_names),)
         self.gripper = 0.02  # [m], never commanded
         self.commands_received = 0
         self.rejected_commands = 0
+        #: Every valid command received, in order: ``(time.monotonic(), values)``.
+        self.commands: list[tuple[float, np.ndarray]] = []
         self._command: np.ndarray | None = None
         self._command_time = 0.0
         self._timeout = command_timeout
         self._lock = threading.Lock()
+        #: False: no joint_states go out (the arm's driver went quiet), the arm still moves.
+        self.publishing = True
         #: The arm joint positions after each integration step: the path the arm took.
         self.history: list[np.ndarray] = []
         self._context = rclpy.Context()
@@ -68,7 +83,8 @@ class FakeHardware:
         )
         self.node.create_publisher(String, "robot_description", latched).publish(String(data=urdf_text))
         self._joint_states = self.node.create_publisher(JointState, "joint_states", 10)
-        self.node.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, 10)
+        # Deep: the tests check every command of the stream, none may be dropped.
+        self.node.create_subscription(Float64MultiArray, command_topic, self._on_command, 1000)
         self._dt = 1.0 / rate_hz
         self._last = time.monotonic()
         self.node.create_timer(self._dt, self._step)
@@ -91,6 +107,7 @@ class FakeHardware:
             self._command = values
             self._command_time = time.monotonic()
             self.commands_received += 1
+            self.commands.append((self._command_time, values))
 
     def _step(self) -> None:
         now = time.monotonic()
@@ -101,6 +118,8 @@ class FakeHardware:
                 self.q = self.q + self._command * dt
             q = self.q.copy()
             self.history.append(q)
+        if not self.publishing:
+            return
         msg = JointState()
         msg.header.stamp = self.node.get_clock().now().to_msg()
         # The hardware's own order: the gripper first, the arm joints reversed.
@@ -112,6 +131,13 @@ class FakeHardware:
         """Arm joint positions now (URDF order)."""
         with self._lock:
             return self.q.copy()
+
+    def held_command(self) -> np.ndarray | None:
+        """The command the arm moves on now (the last one while it is fresh), or None."""
+        with self._lock:
+            if self._command is None or time.monotonic() - self._command_time > self._timeout:
+                return None
+            return self._command.copy()
 
     def close(self) -> None:
         self._stop.set()

@@ -113,3 +113,13 @@ class Harness:
 def statuses(diagnostics: list, name: str) -> list:
     """The DiagnosticStatus entries named ``name`` in received DiagnosticArrays."""
     return [status for msg in diagnostics for status in msg.status if status.name == name]
+
+
+def without_acceleration_limits(joint_names) -> dict:
+    """Parameters that switch the command filter's acceleration and jerk limits off for every
+    joint: the commands are then the control law's own (tests of the law's values)."""
+    values = {}
+    for joint in joint_names:
+        values[f"joint_limits.{joint}.has_acceleration_limits"] = False
+        values[f"joint_limits.{joint}.has_jerk_limits"] = False
+    return values

@@ -13,7 +13,9 @@ from hypothesis import strategies as st
 
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.joint_control import joint_tracking_step
+from manip_kin.joint_limits import JointLimit, JointLimits
 from manip_kin.joint_trajectory import (
+    JOINT_TIME_SCALINGS,
     MIN_MOVE_DURATION,
     TrajectoryPoint,
     move_duration,
@@ -120,7 +122,7 @@ def test_names_are_matched_in_any_order():
         (["joint1", "joint2", "joint3", "elbow"], [TrajectoryPoint(2.0, [0] * 4)], "cubic", "['elbow'] are not joints"),
         (["joint1", "joint1", "joint3", "joint4"], [TrajectoryPoint(2, [0] * 4)], "cubic", "more than once"),
         (None, [], "cubic", "no points"),
-        (None, [TrajectoryPoint(0.0, [0] * 4)], "cubic", "is not after 0 (the start)"),
+        (None, [TrajectoryPoint(0.0, [0] * 4), TrajectoryPoint(1.0, [0] * 4)], "cubic", "is not after 0 (the start)"),
         (None, [TrajectoryPoint(2.0, [0] * 4), TrajectoryPoint(2.0, [0] * 4)], "cubic", "not after point 1's 2 s"),
         (None, [TrajectoryPoint(2.0, [0] * 4), TrajectoryPoint(1.0, [0] * 4)], "cubic", "strictly increasing"),
         (None, [TrajectoryPoint(math.nan, [0] * 4)], "cubic", "time_from_start nan"),
@@ -156,6 +158,38 @@ def test_move_duration_puts_the_slowest_joint_at_its_limit(scaling):
     with pytest.raises(InvalidArgumentError, match="too fast"):
         plan_joint_trajectory(SCARA, Q_START, SCARA.joint_names, [TrajectoryPoint(0.98 * duration, Q_GOAL)], scaling)
     assert move_duration(SCARA, Q_GOAL, Q_GOAL, scaling) == MIN_MOVE_DURATION
+
+
+@pytest.mark.parametrize("scaling", JOINT_TIME_SCALINGS)
+@pytest.mark.parametrize("acceleration", [0.5, 5.0, 50.0])
+def test_move_duration_with_acceleration_and_jerk_limits(scaling, acceleration):
+    """The shortest duration puts some joint at its velocity, acceleration or jerk limit (from
+    samples of the planned move, by finite differences), none beyond; a one-point trajectory at
+    time 0 gets it; 2 % faster is refused."""
+    per_joint = {
+        name: JointLimit(True, v, True, acceleration, False, 1.0, True, 20.0 * acceleration)
+        for name, v in zip(SCARA.joint_names, SCARA.velocity_limits)
+    }
+    limits = JointLimits.of(SCARA, per_joint)
+    plan = plan_joint_trajectory(SCARA, Q_START, SCARA.joint_names, [TrajectoryPoint(0.0, Q_GOAL)], scaling, limits)
+    duration = plan.duration
+    assert duration == pytest.approx(move_duration(SCARA, Q_START, Q_GOAL, scaling, limits))
+    step = duration / 4000
+    times = np.arange(1, 4000) * step
+    speeds = np.array([plan.sample(t)[1] for t in times])
+    accelerations = np.diff(speeds, axis=0) / step
+    jerks = np.diff(accelerations, axis=0) / step
+    ratios = [
+        np.max(np.abs(speeds) / SCARA.velocity_limits),
+        np.max(np.abs(accelerations) / acceleration),
+    ]
+    if scaling == "quintic":  # the only one whose jerk is bounded at the ends (see the module doc)
+        ratios.append(np.max(np.abs(jerks) / (20.0 * acceleration)))
+    assert max(ratios) <= 1.0 + 2e-3 and max(ratios) > 0.97, ratios
+    with pytest.raises(InvalidArgumentError, match="too fast"):
+        plan_joint_trajectory(
+            SCARA, Q_START, SCARA.joint_names, [TrajectoryPoint(0.98 * duration, Q_GOAL)], scaling, limits
+        )
 
 
 # --- the tracking law ------------------------------------------------------------------------------

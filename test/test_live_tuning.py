@@ -8,7 +8,7 @@ must change what the running node does, not only what ``get`` returns.
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from node_harness import Harness
+from node_harness import Harness, without_acceleration_limits
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
@@ -142,7 +142,14 @@ def test_generator_limits_set_at_run_time_time_the_next_line(harness):
     start = frame_pose(model, q0)
     target = start.copy()
     target[:3, 3] += [0.0, 0.12, -0.05]  # 0.13 m, no rotation
-    node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=RATE, time_scaling="constant")
+    # A constant line runs only without joint acceleration limits (it is a velocity step).
+    node = harness.start(
+        TrajectoryGeneratorNode,
+        robot="irb120",
+        rate_hz=RATE,
+        time_scaling="constant",
+        **without_acceleration_limits(model.joint_names),
+    )
     harness.executor.add_node(node)
     for topic, msg_type in (("/line_target", PoseStamped), ("/joint_states", JointState)):
         harness.wait_matched(topic, msg_type)

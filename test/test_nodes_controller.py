@@ -17,7 +17,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from kin_reference import numeric_geometric_jacobian, resolved_rates, rotation_log, velocity_scaled
-from node_harness import Harness, statuses
+from node_harness import Harness, statuses, without_acceleration_limits
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -77,6 +77,8 @@ def _start(harness, robot="genova7", **params):
     # joint_state_timeout 1 s (default 0.1): this process streams the joint states, and on a
     # loaded machine it can stall for more than 0.1 s, which would make a command zeros.
     params.setdefault("joint_state_timeout", 1.0)
+    # The law's own commands: these tests check its values (test_nodes_safety checks the limits).
+    params = {**without_acceleration_limits(load_robot(robot).joint_names), **params}
     node = harness.start(CartesianControllerNode, robot=robot, rate_hz=RATE, **params)
     harness.wait_matched("/joint_states", JointState)
     harness.wait_matched("/goal_pose", PoseStamped)

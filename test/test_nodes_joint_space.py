@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from node_harness import Harness, statuses
+from node_harness import Harness, statuses, without_acceleration_limits
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory
@@ -175,7 +175,7 @@ def test_bad_trajectories_rejected_with_the_reason(harness, capfd):
     logged = capfd.readouterr().err
     assert "rejected joint_trajectory" in logged or "rejected /joint_trajectory" in logged
     # Still works afterwards.
-    harness.publish("joint_trajectory", _trajectory([TrajectoryPoint(0.3, [0.1] * 4)], harness=harness))
+    harness.publish("joint_trajectory", _trajectory([TrajectoryPoint(0.6, [0.1] * 4)], harness=harness))
     assert harness.spin_until(lambda: node.state == "holding", 3, every=stream)
     # The final reference is published as the state changes; let it arrive.
     assert harness.spin_until(lambda: np.allclose(references[-1].position, [0.1] * 4, atol=1e-12), 2, every=stream)
@@ -209,6 +209,8 @@ def test_latest_goal_of_either_kind_wins_in_the_generator(harness):
 def _start_controller(harness, **params):
     commands = harness.collect(Float64MultiArray, "joint_velocity_commands")
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    # The law's own commands: this checks its values (test_nodes_safety checks the limits).
+    params = {**without_acceleration_limits(NAMES), **params}
     node = harness.start(CartesianControllerNode, robot="scara", rate_hz=RATE, **params)
     for topic, msg_type in (
         ("joint_states", JointState),

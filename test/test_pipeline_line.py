@@ -15,7 +15,7 @@ from geometry_msgs.msg import PoseStamped
 from pipeline_checks import fast_dds_receive_threads, realtime_scheduling_error, stop_checked
 
 from manip_kin.nodes import conversions as conv
-from manip_kin.pipeline import Pipeline, fresh_domain_env, pipeline_processes
+from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, fresh_domain_env, pipeline_processes
 from manip_kin.rotations import make_transform, rpy_to_matrix
 from manip_kin.trajectory import distance_to_segment
 
@@ -38,7 +38,7 @@ def irb120(tmp_path_factory):
         "irb120",
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
+        generator=IRB120_LINE_GENERATOR,
         realtime_priority=0 if REALTIME_ERROR else 10,
     )
     if REALTIME_ERROR:
@@ -89,7 +89,10 @@ def test_irb120_line_tracked_along_the_segment(irb120):
     target = client.send_line(make_transform(DOWN, end))
     done = client.wait_line_done(target, 15)
     assert done.message == "holding", done.values
-    assert abs(done.number("duration") - np.linalg.norm(np.subtract(end, start)) / 0.4) < 0.02
+    # The trapezoid: the line at its speed, plus one ramp's time (v/a).
+    speed, acceleration = IRB120_LINE_GENERATOR["max_linear_velocity"], IRB120_LINE_GENERATOR["max_linear_acceleration"]
+    expected = np.linalg.norm(np.subtract(end, start)) / speed + speed / acceleration
+    assert abs(done.number("duration") - expected) < 0.02
     converged, status = client.wait_converged(done.values["final_goal_stamp"], 15)
     assert converged, status.values if status else None
     # The statuses can be handled ahead of a backlog of queued poses (one callback per spin):

@@ -41,7 +41,7 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
     generator = NodeProcess(
         "trajectory_generator",
         "trajectory_generator",
-        {"rate_hz": 200.0, "time_scaling": "constant", "max_linear_velocity": 0.05},
+        {"rate_hz": 200.0, "time_scaling": "trapezoidal", "max_linear_velocity": 0.05},
         ready_status="trajectory_generator",
     )
     pipeline = Pipeline([controller, generator], log_dir=tmp_path)

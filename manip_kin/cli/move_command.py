@@ -1,16 +1,18 @@
 """``manip_kin move``: a joint-space move through ``trajectory_generator``.
 
 The command reads the running arm's model from ``robot_description`` (or ``--robot``) and
-its configuration from ``joint_states``, checks the target against the joint limits,
-times the move (``--duration``, or the shortest duration within the velocity limits),
-and sends one ``trajectory_msgs/JointTrajectory`` point on ``joint_trajectory``. The
-generator interpolates it with its ``joint_time_scaling`` (``--time-scaling`` sets that
-parameter first when it differs) and streams ``joint_reference`` to the controller.
-``--wait`` follows ``/diagnostics`` until the controller reports the move converged.
+its configuration from ``joint_states``, checks the target against the joint limits and
+sends one ``trajectory_msgs/JointTrajectory`` point on ``joint_trajectory`` at
+``--duration``, or at time 0, which the generator times itself as fast as its joint limits
+(velocity, acceleration, jerk) allow. The generator interpolates it with its
+``joint_time_scaling`` (``--time-scaling`` sets that parameter first when it differs) and
+streams ``joint_reference`` to the controller. The command returns once the generator has
+started (or rejected) the move; ``--wait`` follows ``/diagnostics`` until the controller
+reports the move converged. Ctrl-C during ``--wait`` stops the move.
 
-Exit codes: 0 delivered (and converged with ``--wait``); 1 not converged within
+Exit codes: 0 started (and converged with ``--wait``); 1 not converged within
 ``--timeout``; 2 bad input (wrong joint count, a target outside the limits, a duration too
-short for the velocity limits, no pipeline), one line on stderr.
+short for the joint limits, no pipeline), one line on stderr; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from manip_kin.cli.common import (
     print_json,
 )
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint, move_duration, plan_joint_trajectory
+from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint
 from manip_kin.model import RobotModel
 
 _GENERATOR = "trajectory_generator"
@@ -55,7 +57,7 @@ def register(subparsers) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="duration of the move [s] (default: the shortest within the joint velocity limits)",
+        help="duration of the move [s] (default: the shortest within the generator's joint limits)",
     )
     move.add_argument(
         "--time-scaling",
@@ -139,26 +141,22 @@ def run_move(args: argparse.Namespace) -> int:
             scaling = client.wait_status(_GENERATOR, args.timeout).values.get("joint_time_scaling") or "cubic"
             if args.time_scaling is not None:
                 scaling = _set_time_scaling(client, args.time_scaling, args.timeout)
-            shortest = move_duration(model, q_start, q_goal, scaling)
-            duration = args.duration or shortest
-            point = TrajectoryPoint(duration, q_goal)
-            try:
-                plan_joint_trajectory(model, q_start, model.joint_names, [point], scaling)
-            except InvalidArgumentError as error:
-                if "too fast" not in str(error):
-                    raise
-                needs = str(error).split(": ", 1)[1].split(";")[0]  # "joint 'j1' needs 15 rad/s, its limit is 2 rad/s"
-                raise InvalidArgumentError(
-                    f"--duration {duration:g} s is too short: {needs}; valid: >= {shortest:.4g} s for this move "
-                    f"with {scaling} scaling"
-                ) from None
-            if args.wait:
-                client.wait_status(_CONTROLLER, args.timeout)  # /diagnostics matched before the move goes out
+            # 0: as fast as the generator's joint limits allow; it times the move itself, so a
+            # duration computed here from a stale snapshot cannot be refused.
+            point = TrajectoryPoint(args.duration or 0.0, q_goal)
+            for node in (_GENERATOR, _CONTROLLER) if args.wait else (_GENERATOR,):
+                client.wait_status(node, args.timeout)  # /diagnostics matched before the move goes out
             start = time.monotonic()
             stamp = client.send_joint_trajectory(make_joint_trajectory(model.joint_names, [point]), args.timeout)
+            generator = client.wait_target_taken(stamp, args.timeout, _GENERATOR)
         except PipelineError as error:
             print(f"manip_kin move: error: {error}", file=sys.stderr)
             return 2
+        if generator.values.get("rejected_stamp") == stamp:
+            reason = generator.values.get("last_rejection", "")
+            print(f"manip_kin move: error: trajectory rejected: {reason}", file=sys.stderr)
+            return 2
+        duration = generator.number("duration")
         payload = {
             "topic": client.topic("joint_trajectory"),
             "stamp": stamp,
@@ -173,9 +171,14 @@ def run_move(args: argparse.Namespace) -> int:
             f"in {duration:.3f} s ({scaling})"
         )
         if not args.wait:
-            _report(args, payload, f"{summary} delivered on {payload['topic']} (stamp {stamp})")
+            _report(args, payload, f"{summary} started on {payload['topic']} (stamp {stamp})")
             return 0
-        return _await(args, client, stamp, start, payload, summary)
+        try:
+            return _await(args, client, stamp, start, payload, summary)
+        except KeyboardInterrupt:
+            from manip_kin.cli.ros_commands import stop_on_interrupt
+
+            return stop_on_interrupt("move", client, (_GENERATOR, _CONTROLLER))
 
 
 def _await(args, client, stamp: str, start: float, payload: dict, summary: str) -> int:
@@ -186,9 +189,6 @@ def _await(args, client, stamp: str, start: float, payload: dict, summary: str) 
     except PipelineError as error:
         print(f"manip_kin move: error: {error}", file=sys.stderr)
         return 1
-    if generator.values.get("rejected_stamp") == stamp:
-        print(f"manip_kin move: error: trajectory rejected: {generator.values.get('last_rejection')}", file=sys.stderr)
-        return 2
     remaining = max(args.timeout - (time.monotonic() - start), 0.1)
     converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining, _CONTROLLER)
     elapsed = client.time_to_converge(generator.values["final_goal_stamp"], start, _CONTROLLER)

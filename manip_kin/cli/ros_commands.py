@@ -10,9 +10,15 @@ With ``--xyz`` alone (no ``--rpy``/``--quat``) the target is position-only: the 
 carries the current tool orientation (from ``tool_pose``), which a controller and generator
 with ``task:=position`` leave free.
 
-Exit codes: 0 delivered (and converged with ``--wait``); 1 ``--wait`` timed out before
-convergence (the final errors are printed), or a line that leaves the arm's reach; 2 bad
-input, no subscriber within ``--timeout``, or a line target the generator rejected as invalid.
+Without ``--wait`` the command returns once the controller reports the goal's stamp as its
+goal (a goal it missed is sent again), so goals sent one after another are each followed.
+``--frame`` defaults to the base frame the controller reports. Ctrl-C during ``--wait`` stops
+the motion it started (the controller's ``~/stop``, and the generator's for a line).
+
+Exit codes: 0 delivered (and converged with ``--wait``); 1 ``--wait`` ended without
+convergence (unreachable, stopped or timed out; the reason and the final errors are printed),
+or a line that leaves the arm's reach; 2 bad input, no subscriber within ``--timeout``, or a
+goal or line target rejected as invalid (with the node's reason); 130 interrupted.
 """
 
 from __future__ import annotations
@@ -61,7 +67,9 @@ def register(subparsers) -> None:
 def _add_common(parser: argparse.ArgumentParser) -> None:
     add_pose_arguments(parser)
     parser.add_argument(
-        "--frame", default="base_link", help="frame_id of the pose: the base frame of the robot (default base_link)"
+        "--frame",
+        default=None,
+        help="frame_id of the pose: the robot's base frame (default: the one the controller reports)",
     )
     parser.add_argument(
         "--wait",
@@ -108,7 +116,8 @@ def _format_errors(errors: dict) -> str:
 
 
 def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str, ...]):
-    """Publish the pose with ``send``; with ``--wait``, first hear each node's /diagnostics.
+    """Publish the pose with ``send`` once each node's /diagnostics is heard (so the outcome is
+    too); without ``--wait``, return once the controller has taken it.
 
     Returns:
         ``(start time, stamp, payload)`` once delivered, or an exit code when done.
@@ -118,17 +127,16 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     pose = pose_from_args(args)
     position_only = args.rpy is None and args.quat is None
     try:
-        if position_only:
-            from geometry_msgs.msg import PoseStamped
+        from geometry_msgs.msg import PoseStamped
 
-            client.wait_subscribers(PoseStamped, topic, args.timeout)  # "nobody listens" before "no tool pose"
+        client.wait_subscribers(PoseStamped, topic, args.timeout)  # "nobody listens" first
+        statuses = [client.wait_status(node, args.timeout) for node in ready_nodes]
+        client.base_frame = args.frame or statuses[-1].values.get("base_frame") or "base_link"
+        if position_only:
             pose[:3, :3] = client.current_tool_pose(args.timeout)[:3, :3]
-        if args.wait:
-            # A status from each node proves /diagnostics is matched before the pose goes out.
-            for node in ready_nodes:
-                client.wait_status(node, args.timeout)
         start = time.monotonic()
         stamp = send(pose, timeout=args.timeout)
+        taken = client.wait_taken(stamp, args.timeout) if topic == "goal_pose" and not args.wait else None
     except PipelineError as error:
         print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -137,11 +145,17 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
         "topic": topic,
         "stamp": stamp,
         "xyz": pose[:3, 3].tolist(),
-        "frame": args.frame,
+        "frame": client.base_frame,
         "position_only": position_only,
     }
+    if taken is not None and client.outcome(taken, stamp).word == "rejected":
+        print(
+            f"manip_kin {args.command}: error: goal rejected: {taken.values.get('last_rejection', '')}", file=sys.stderr
+        )
+        return 2
     if not args.wait:
-        _report(args, payload, f"{label} {pose[:3, 3].round(4).tolist()} delivered on {topic} (stamp {stamp})")
+        what = "taken by the controller" if taken is not None else "delivered"
+        _report(args, payload, f"{label} {pose[:3, 3].round(4).tolist()} {what} on {topic} (stamp {stamp})")
         return 0
     return start, stamp, payload
 
@@ -149,18 +163,44 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
 def _await_convergence(
     args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, suffix: str = ""
 ) -> int:
-    """Wait for the controller to report ``goal_stamp`` converged; report; 0 or 1."""
+    """Wait for the controller to say how ``goal_stamp`` ended; report; its exit code."""
     converged, status = client.wait_converged(goal_stamp, timeout)
     elapsed = client.time_to_converge(goal_stamp, start)
+    outcome = client.outcome(status, goal_stamp)
+    if outcome.word == "rejected":
+        print(f"manip_kin {args.command}: error: goal rejected: {outcome.reason}", file=sys.stderr)
+        return 2
     errors = _errors(status)
-    payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
-    verdict = (
-        f"converged in {elapsed:.2f} s"
-        if converged
-        else f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
+    payload.update(
+        converged=converged,
+        outcome=outcome.word or "timeout",
+        reason=outcome.reason,
+        time=elapsed,
+        final_error=errors,
+        state=status.message if status else None,
     )
+    if converged:
+        verdict = f"converged in {elapsed:.2f} s"
+    elif outcome.word:
+        verdict = f"{outcome.word} after {elapsed:.2f} s ({outcome.reason})"
+    else:
+        verdict = f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
     _report(args, payload, f"{label} {verdict}{suffix}: {_format_errors(errors)}")
-    return 0 if converged else 1
+    return outcome.exit_code
+
+
+def stop_on_interrupt(command: str, client, nodes: tuple[str, ...]) -> int:
+    """After Ctrl-C of a waiting command: halt what it started (``~/stop`` of each node, the
+    streaming one first); exit code 130."""
+    from manip_kin.pipeline import PipelineError
+
+    for node in nodes:
+        try:
+            client.call_trigger(node, "stop", timeout=2.0)
+        except PipelineError as error:
+            print(f"manip_kin {command}: could not stop {node}: {error}", file=sys.stderr)
+    print(f"manip_kin {command}: interrupted: stopped the motion ({', '.join(nodes)})", file=sys.stderr)
+    return 130
 
 
 def run_goal(args: argparse.Namespace) -> int:
@@ -169,52 +209,62 @@ def run_goal(args: argparse.Namespace) -> int:
 
     _check_timeout(args)
     namespace = namespace_from_args(args)
-    with PipelineClient(watch_state=False, base_frame=args.frame, namespace=namespace) as client:
+    with PipelineClient(watch_state=False, namespace=namespace) as client:
         delivered = _deliver(args, client, client.send_goal, "goal_pose", "goal", ("cartesian_controller",))
         if isinstance(delivered, int):
             return delivered
         start, stamp, payload = delivered
-        return _await_convergence(args, client, stamp, start, payload, "goal", args.timeout)
+        try:
+            return _await_convergence(args, client, stamp, start, payload, "goal", args.timeout)
+        except KeyboardInterrupt:
+            return stop_on_interrupt("goal", client, ("cartesian_controller",))
 
 
 def run_line(args: argparse.Namespace) -> int:
     """``manip_kin line``."""
-    from manip_kin.pipeline import PipelineClient, PipelineError
+    from manip_kin.pipeline import PipelineClient
 
     _check_timeout(args)
     namespace = namespace_from_args(args)
-    with PipelineClient(watch_state=False, base_frame=args.frame, namespace=namespace) as client:
-        delivered = _deliver(
-            args,
-            client,
-            client.send_line,
-            "line_target",
-            "line target",
-            ("trajectory_generator", "cartesian_controller"),
-        )
-        if isinstance(delivered, int):
-            return delivered
-        start, stamp, payload = delivered
+    with PipelineClient(watch_state=False, namespace=namespace) as client:
         try:
-            generator = client.wait_line_done(stamp, args.timeout)
-        except PipelineError as error:
-            print(f"manip_kin line: error: {error}", file=sys.stderr)
-            return 1
-        if generator.values.get("rejected_stamp") == stamp:
-            print(
-                f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr
-            )
-            # A valid line the arm cannot follow is "not achieved" (1); a malformed one is bad input (2).
-            return 1 if generator.values.get("rejection_kind") == "unreachable" else 2
-        payload["line_duration"] = generator.number("duration")
-        remaining = max(args.timeout - (time.monotonic() - start), 0.1)
-        return _await_convergence(
-            args,
-            client,
-            generator.values["final_goal_stamp"],
-            start,
-            payload,
-            "line",
-            remaining,
-            suffix=f" (line {payload['line_duration']:.2f} s)",
-        )
+            return _run_line(args, client)
+        except KeyboardInterrupt:
+            return stop_on_interrupt("line", client, ("trajectory_generator", "cartesian_controller"))
+
+
+def _run_line(args: argparse.Namespace, client) -> int:
+    from manip_kin.pipeline import PipelineError
+
+    delivered = _deliver(
+        args,
+        client,
+        client.send_line,
+        "line_target",
+        "line target",
+        ("trajectory_generator", "cartesian_controller"),
+    )
+    if isinstance(delivered, int):
+        return delivered
+    start, stamp, payload = delivered
+    try:
+        generator = client.wait_line_done(stamp, args.timeout)
+    except PipelineError as error:
+        print(f"manip_kin line: error: {error}", file=sys.stderr)
+        return 1
+    if generator.values.get("rejected_stamp") == stamp:
+        print(f"manip_kin line: error: target rejected: {generator.values.get('last_rejection', '')}", file=sys.stderr)
+        # A valid line the arm cannot follow is "not achieved" (1); a malformed one is bad input (2).
+        return 1 if generator.values.get("rejection_kind") == "unreachable" else 2
+    payload["line_duration"] = generator.number("duration")
+    remaining = max(args.timeout - (time.monotonic() - start), 0.1)
+    return _await_convergence(
+        args,
+        client,
+        generator.values["final_goal_stamp"],
+        start,
+        payload,
+        "line",
+        remaining,
+        suffix=f" (line {payload['line_duration']:.2f} s)",
+    )

@@ -14,20 +14,25 @@ at ``diagnostics_rate_hz`` and at once when the state changes.
 from __future__ import annotations
 
 import sys
+import time
+from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 
 from manip_kin.bounds import InputBounds
+from manip_kin.command_filter import CommandFilter
 from manip_kin.control import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.errors import ManipKinError
 from manip_kin.joint_control import JointTrackingOutput, joint_tracking_step
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
+from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import JointReferenceReader
 from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
@@ -46,16 +51,27 @@ class CartesianControllerNode(LoopingNode):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
         self.model = load_node_model(self, params)
+        limit_specs = joint_limit_parameters(self.model)
+        params.update(declare_parameters(self, limit_specs))
         self._params = params
+        self.rate_hz = params["rate_hz"]
+        self.dt = 1.0 / self.rate_hz
         self._configure(params)
         config = self.controller.config
         self.base_frame = params["base_frame"] or self.model.base_frame
-        self.rate_hz = params["rate_hz"]
-        self.dt = 1.0 / self.rate_hz
         self.supervisor = ControllerSupervisor(
             self._supervisor_config(params, self.controller), self.model.joint_names, self._diagnostics_period_ns
         )
-        LiveParameters(self, PARAMETERS, self._set_parameters)
+        LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
+        # Service callbacks only queue the request; the loop acts on it (deque: thread-safe).
+        self._requests: deque[tuple[str, bool]] = deque()
+        self.create_service(Trigger, "~/stop", self._on_stop)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self._halting = False
+        self.halted = False
+        self.last_rejection = ""
+        self.rejected_stamp = ""
+        self._report_now = False
         self._goal_stream_gap_ns = int(5e9 / self.rate_hz)  # goals closer than 5 periods: a stream
         self._goal_arrival_ns = 0
 
@@ -97,8 +113,10 @@ class CartesianControllerNode(LoopingNode):
         self.get_logger().info(
             f"robot {self.model.name}: controlling frame {self.model.frame_name(self.controller.frame_index)!r} "
             f"at {self.rate_hz:g} Hz, gains {config.gain_angular:g}/{config.gain_linear:g} 1/s, "
-            f"goals in frame {self.base_frame!r}, task {self.controller.task.name}"
+            f"goals in frame {self.base_frame!r}, task {self.controller.task.name}, {self._limits_text()}"
         )
+        self._state_log = ThrottledLog(self.get_logger().info, 0.0)
+        self._logged_state = self.state
         # A new goal runs a cycle at once instead of waiting for the next tick.
         self.start_loop(
             self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"], wake_on=(self._goal_sub,)
@@ -139,8 +157,20 @@ class CartesianControllerNode(LoopingNode):
         controller = CartesianController(self.model, config)
         supervisor_config = self._supervisor_config(params, controller)
         diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        limits = joint_limits_from_params(self.model, params)
         if hasattr(self, "supervisor"):
             self.supervisor.reconfigure(supervisor_config, diagnostics_period_ns)
+        limit_velocity = params["respect_velocity_limits"]
+        if hasattr(self, "command_filter"):
+            self.command_filter.configure(limits, limit_velocity)
+        else:
+            self.command_filter = CommandFilter(limits, self.model.lower, self.model.upper, self.dt, limit_velocity)
+        self.stop_time = params["stop_time"]
+        # The law keeps q + q̇·horizon within the position limits: with the horizon of a stop
+        # from full speed, a joint nears a limit as slowly as the filter lets it stop, so the
+        # law (not only the filter's braking) knows the joint is held and redistributes the task.
+        full_stop = limits.stopping_time(np.where(np.isfinite(limits.velocity), limits.velocity, 0.0))
+        self.limit_horizon = max(self.dt, full_stop)
         self.controller = controller
         self.position_tolerance = params["position_tolerance"]
         self.orientation_tolerance = params["orientation_tolerance"]
@@ -161,6 +191,7 @@ class CartesianControllerNode(LoopingNode):
             orientation_tolerance=params["orientation_tolerance"],
             joint_tolerance=params["joint_tolerance"],
             task=controller.task,
+            progress_window=params["progress_window"],
         )
 
     def _set_parameters(self, updates: dict) -> str | None:
@@ -190,6 +221,7 @@ class CartesianControllerNode(LoopingNode):
                 )
         pose_stamp = reference_stamp = None
         while (data := self._goal_sub.take(raw=True)) is not None:
+            msg = None
             try:
                 msg = conv.decode_pose_stamped(data, "goal pose")  # a goal wakes the loop: read it fast
                 problem = conv.pose_problem(
@@ -199,6 +231,7 @@ class CartesianControllerNode(LoopingNode):
                 problem = str(error)
             if problem is not None:
                 self.rejected_goals += 1
+                self._rejected(problem, msg)
                 self._warn(
                     "goal:" + conv.problem_kind(problem),
                     f"rejected {self._goal_sub.subscription.topic_name}: {problem}; keeping the previous goal",
@@ -206,7 +239,6 @@ class CartesianControllerNode(LoopingNode):
                 continue
             self.goal = conv.pose_stamped_to_matrix(msg)
             pose_stamp = msg.header.stamp
-            self._goal_arrival_ns = now_ns
         while (msg := self._twist_sub.take()) is not None:
             problem = conv.twist_problem(
                 msg, self.base_frame, "goal twist", self.bounds.max_twist_linear, self.bounds.max_twist_angular
@@ -226,6 +258,7 @@ class CartesianControllerNode(LoopingNode):
                 self.reference = self._references.read(msg)
             except conv.InvalidMessageError as error:
                 self.rejected_references += 1
+                self._rejected(str(error), msg)
                 self._warn(
                     "reference:" + conv.problem_kind(str(error)),
                     f"rejected {self._reference_sub.subscription.topic_name}: {error}; keeping the previous goal",
@@ -233,6 +266,7 @@ class CartesianControllerNode(LoopingNode):
                 continue
             reference_stamp = msg.header.stamp
         # The latest goal of either kind wins; when both came in one cycle, the later stamp.
+        quiet_before = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
         if pose_stamp is not None and (
             reference_stamp is None or conv.stamp_to_ns(pose_stamp) > conv.stamp_to_ns(reference_stamp)
         ):
@@ -241,12 +275,47 @@ class CartesianControllerNode(LoopingNode):
         elif reference_stamp is not None:
             self.goal_stamp = conv.stamp_key(reference_stamp)
             self.supervisor.goal_received(now_ns, GoalKind.JOINT, bool(self.reference[1].any()))
+        else:
+            return
+        self._goal_arrival_ns = now_ns
+        # A goal after a quiet spell (not a line's stream): say at once that it was taken.
+        self._report_now = self._report_now or quiet_before
+
+    def _rejected(self, reason: str, msg) -> None:
+        """Keep a rejected goal's reason and stamp for the status (a CLI waits on them)."""
+        self.last_rejection = reason[:300]
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        self.rejected_stamp = conv.stamp_key(stamp) if stamp is not None else ""
+        self._report_now = True
+
+    def _take_requests(self) -> None:
+        """Act on the queued ``~/stop`` and ``~/pause`` requests (in the loop thread)."""
+        while self._requests:
+            kind, value = self._requests.popleft()
+            if kind == "stop":
+                self.supervisor.stop_requested()
+            else:
+                self.supervisor.pause_requested(value)
+            self._report_now = True
+
+    def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._requests.append(("stop", True))
+        response.success = True
+        response.message = "stopping: the commands come to rest within the limits; the goal is dropped"
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        self._requests.append(("pause", bool(request.data)))
+        response.success = True
+        response.message = "pausing: holding still, the goal kept" if request.data else "resuming the goal"
+        return response
 
     # --- the cycle -------------------------------------------------------------------------------
 
     def publish_safe_output(self) -> None:
-        """After a failed cycle: zero joint rates."""
-        self._command_pub.publish(self._command_cdr.encode(self._zeros))
+        """After a failed cycle: the next command of the way to rest (within the limits)."""
+        if not self._halting:
+            self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(self._zeros)))
 
     def law_positions(self) -> np.ndarray:
         """The joint positions the law runs on: the reported ones, or with ``predict_state``
@@ -264,31 +333,92 @@ class CartesianControllerNode(LoopingNode):
         )
 
     def _cycle(self, now_ns: int) -> None:
+        if self._halting:  # halt() owns the command stream now
+            return
         self._take_inputs(now_ns)
+        self._take_requests()
         supervisor = self.supervisor
-        qdot = self._zeros
+        target = self._zeros
+        q = None
         if supervisor.gate(now_ns):
             try:
                 q = self.law_positions()
                 if supervisor.goal_kind is GoalKind.JOINT:
-                    qdot = self._joint_step(now_ns, q)
+                    target = self._joint_step(now_ns, q)
                 else:
                     twist_fresh = supervisor.feed_forward_fresh(now_ns)
-                    output = self.controller.step(q, self.goal, self._twist if twist_fresh else None, self.dt)
+                    output = self.controller.step(
+                        q, self.goal, self._twist if twist_fresh else None, self.limit_horizon
+                    )
                     self.output = output
-                    qdot = output.qdot
-                    supervisor.pose_step_done(output, twist_fresh)
+                    target = output.qdot
+                    supervisor.pose_step_done(output, twist_fresh, now_ns, self.command_filter.braking_joints)
             except ManipKinError as error:
-                qdot = self._zeros
+                target = self._zeros
                 supervisor.step_failed(error)
-                self._warn("step", f"control step failed, publishing zeros: {error}")
-        self._command_pub.publish(self._command_cdr.encode(qdot))
+                self._warn("step", f"control step failed, coming to rest: {error}")
+        elif supervisor.state is not ControllerState.STALE_INPUT:
+            q = self.q  # halted with a fresh state: still brake before the position limits
+        self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(target, q)))
         if self.waiter is not None:
             # Wake on a goal after a quiet spell (a new goal: react at once); not while goals
             # stream in every cycle (a line), which keeps the loop on its own schedule.
             self.waiter.enabled = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
-        if supervisor.report_due(now_ns):
+        if supervisor.state != self._logged_state:
+            self._log_state_change()
+        if supervisor.report_due(now_ns) or self._report_now:
+            self._report_now = False
             self._publish_diagnostics(now_ns)
+
+    def _log_state_change(self) -> None:
+        """One INFO line per change into or out of a halted or unreachable state."""
+        state = self.supervisor.state
+        previous, self._logged_state = self._logged_state, state
+        halted = (ControllerState.UNREACHABLE, ControllerState.PAUSED, ControllerState.STOPPED)
+        if state in halted or previous in halted:
+            self._state_log(f"state:{state}", f"{previous} -> {state}: {self.supervisor.detail}")
+
+    def _limits_text(self) -> str:
+        limits = self.command_filter.limits
+        if not limits.limits_acceleration:
+            return "no acceleration limits"
+        return (
+            f"acceleration limits {np.round(limits.acceleration, 3).tolist()}, "
+            f"jerk limits {np.round(limits.jerk, 1).tolist()} (rad|m, s)"
+        )
+
+    def halt(self) -> None:
+        """Stop the loop and bring the commands to rest within the limits, for at most
+        ``stop_time``; the last command is an exact zero. For every way the node ends (a
+        signal, a loop that gave up, shutdown); idempotent."""
+        if self.halted:
+            return
+        self._halting = True
+        if hasattr(self, "loop"):
+            self.loop.stop()
+        if not self.context.ok():
+            self.halted = True
+            return
+        deadline = time.monotonic() + self.stop_time
+        next_ns = time.monotonic_ns()
+        period_ns = int(self.dt * 1e9)
+        try:
+            while not self.command_filter.at_rest and time.monotonic() < deadline:
+                self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(self._zeros)))
+                next_ns += period_ns
+                time.sleep(max(0.0, (next_ns - time.monotonic_ns()) * 1e-9))
+            if not self.command_filter.at_rest:
+                self._warn("stop_time", f"stop_time {self.stop_time:g} s ran out before the commands were at rest")
+            self.command_filter.reset()
+            self._command_pub.publish(self._command_cdr.encode(self._zeros))
+        except Exception as error:  # noqa: BLE001 - the context went down meanwhile: nothing left to send
+            self._warn("halt", f"could not finish the halt: {type(error).__name__}: {error}")
+        self.halted = True
+
+    def stop(self) -> None:
+        """Halt (see :meth:`halt`), then stop the loop thread."""
+        self.halt()
+        super().stop()
 
     def _joint_step(self, now_ns: int, q: np.ndarray) -> np.ndarray:
         """One step of the joint tracking law from ``q``; the reference velocity is used while it
@@ -301,7 +431,7 @@ class CartesianControllerNode(LoopingNode):
             q_reference,
             qdot_reference if fresh else None,
             self.gain_joint,
-            self.dt,
+            self.limit_horizon,
             self.controller.config.respect_position_limits,
             self.controller.config.respect_velocity_limits,
         )
@@ -325,6 +455,12 @@ class CartesianControllerNode(LoopingNode):
             ("rejected_twists", str(self.rejected_twists)),
             ("rejected_joint_states", str(self.rejected_joint_states)),
             ("rejected_references", str(self.rejected_references)),
+            ("rejected_stamp", self.rejected_stamp),
+            ("last_rejection", self.last_rejection),
+            ("base_frame", self.base_frame),
+            ("command_filter", self.command_filter.result),
+            ("braking_joints", ",".join(self.model.joint_names[i] for i in self.command_filter.braking_joints)),
+            ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),
             ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
         level = self.diagnostic_level(self.supervisor.level)
@@ -375,7 +511,9 @@ class CartesianControllerNode(LoopingNode):
 
 def main(argv=None) -> int:
     """Entry point of the ``cartesian_controller`` executable."""
-    return run_node(CartesianControllerNode, USAGE, argv, on_shutdown=lambda node: node.stop())
+    return run_node(
+        CartesianControllerNode, USAGE, argv, on_shutdown=lambda node: node.stop(), halt=lambda node: node.halt()
+    )
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 
 from __future__ import annotations
 
+from manip_kin.nodes.joint_limit_params import HELP_LINE
 from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import ControllerState
@@ -144,6 +145,26 @@ PARAMETERS = (
         positive=True,
         tunable=True,
     ),
+    ParamSpec(
+        "stop_time",
+        "float",
+        1.0,
+        "longest a halt may take: on exit, ~/stop, ~/pause and faults the commands come to rest within the "
+        "deceleration and jerk limits, and are zero after this at the latest",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
+    ParamSpec(
+        "progress_window",
+        "float",
+        0.5,
+        "a resting goal whose error falls by less than 2 % in this long, with the arm singular or at joint "
+        "limits, is unreachable (the commands come to rest)",
+        "s",
+        positive=True,
+        tunable=True,
+    ),
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -157,9 +178,17 @@ USAGE = usage_text(
     "A joint_reference (positions + velocities by joint name) is followed in joint space\n"
     "instead (q_dot = q_dot_ref + gain_joint (q_ref - q), within the limits); the latest goal\n"
     "of either kind wins. Convergence counts only the task's components.\n"
-    "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
+    "Every command obeys joint_limits.<joint>.* (velocity, acceleration, jerk; ros2_control's\n"
+    "layout): without a goal, without a fresh joint state, paused (~/pause), stopped (~/stop),\n"
+    "at an unreachable goal and on exit, the commands come to rest within them (at most\n"
+    "stop_time), and the last command before exit is an exact zero.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
+    extra_help=HELP_LINE,
+    services=[
+        ("~/stop", "std_srvs/Trigger", "smooth halt within the limits; the goal is dropped"),
+        ("~/pause", "std_srvs/SetBool", "true: hold still within the limits, the goal kept; false: resume"),
+    ],
     subscribes=[
         ("goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
         ("goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),

@@ -192,9 +192,11 @@ class Float64ArrayCdr:
         self._size = size
         self._struct = layout.compile()
 
-    def encode(self, values: np.ndarray) -> bytes:
-        """CDR bytes of ``values``, shape (size,)."""
-        return self._struct.pack(_CDR_LE, 0, 0, self._size, *values.tolist())
+    def encode(self, values: np.ndarray | list[float]) -> bytes:
+        """CDR bytes of ``values``, shape (size,) (an array, or a list of floats)."""
+        return self._struct.pack(
+            _CDR_LE, 0, 0, self._size, *(values.tolist() if isinstance(values, np.ndarray) else values)
+        )
 
 
 # --- decoding the 1 kHz inputs from their CDR bytes ---------------------------------------------

@@ -257,6 +257,8 @@ def usage_text(
     subscribes: Sequence[tuple[str, str, str]],
     publishes: Sequence[tuple[str, str, str]],
     example: str,
+    extra_help: str = "",
+    services: Sequence[tuple[str, str, str]] = (),
 ) -> str:
     """The ``--help`` text of a node executable.
 
@@ -267,6 +269,8 @@ def usage_text(
         subscribes: ``(topic, type, note)`` per input topic.
         publishes: ``(topic, type, note)`` per output topic.
         example: example command line(s).
+        extra_help: lines for parameters declared once the model is known (after the table).
+        services: ``(name, type, note)`` per service.
     """
     lines = [f"usage: {executable} [--help] [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r FROM:=TO ...]", ""]
     lines += [
@@ -276,9 +280,14 @@ def usage_text(
         "those marked 'Settable at run time' also with `ros2 param set` on the running node):",
     ]
     lines += [spec.help_line() for spec in specs]
+    if extra_help:
+        lines.append(extra_help)
     lines += ["", "Subscribes:"]
     lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in subscribes]
     lines += ["", "Publishes:"]
     lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in publishes]
+    if services:
+        lines += ["", "Services:"]
+        lines += [f"  {name} ({srv_type}){': ' + note if note else ''}" for name, srv_type, note in services]
     lines += ["", "Example:", f"  {example}"]
     return "\n".join(lines)

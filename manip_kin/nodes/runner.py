@@ -173,6 +173,37 @@ def _wake_the_executor_once_stopped(stop_signals: _StopSignals, node: Node, exec
     threading.Thread(target=watch, name="wake_executor_on_stop", daemon=True).start()
 
 
+#: Period of the no-op timer that lets Python's signal handler run in a node with a halt [s]:
+#: without rclpy's handler nothing else wakes the executor's wait when a signal comes.
+SIGNAL_POLL_PERIOD_S = 0.02
+
+
+def _halt_then_shut_down(stop_signals: _StopSignals, started: dict, halt: Callable) -> None:
+    """On a stop signal: ``halt(node)`` while the context is up (its last messages still go
+    out), then shut the context down and wake the executor, which ends ``spin()``. Before the
+    node exists (``started`` has no ``node`` yet: waiting for robot_description), only the
+    shutdown, which ends that wait."""
+
+    def watch() -> None:
+        stop_signals.received.wait()
+        node = started.get("node")
+        if node is not None:
+            try:
+                halt(node)
+            except Exception as error:  # noqa: BLE001 - shut down regardless
+                print(f"error: halting {node.get_name()} failed: {type(error).__name__}: {error}", file=sys.stderr)
+        try:
+            import rclpy
+
+            rclpy.try_shutdown()
+            if "executor" in started:
+                started["executor"].wake()
+        except Exception:  # noqa: BLE001 - the executor is already gone: nothing left to wake
+            pass
+
+    threading.Thread(target=watch, name="halt_on_stop", daemon=True).start()
+
+
 def _ignore_signals() -> None:
     """SIGINT and SIGTERM ignored from now on, at the Python level (the node is stopping)."""
     for signal_number in (signal.SIGINT, signal.SIGTERM):
@@ -195,6 +226,7 @@ def run_node(
     usage: str,
     argv: Sequence[str] | None = None,
     on_shutdown: Callable[[Node], None] | None = None,
+    halt: Callable[[Node], None] | None = None,
 ) -> int:
     """Create a node, spin it until Ctrl-C or SIGTERM, then clean up.
 
@@ -204,6 +236,9 @@ def run_node(
         argv: process arguments; defaults to ``sys.argv``.
         on_shutdown: called with the node before it is destroyed, also after
             a signal (used to finish files).
+        halt: called with the node on SIGINT or SIGTERM *before* the context shuts down, so
+            that it can still publish (a controller brings its commands to rest). With it,
+            rclpy's own signal handlers are not installed: Python's run, woken by a timer.
 
     Returns:
         The process exit code: 0 after a clean stop, 2 when the node could not
@@ -233,7 +268,8 @@ def run_node(
         except ValueError:  # not the main thread (a test harness): Python's handler does not run there
             break
     try:
-        rclpy.init(args=argv, signal_handler_options=rclpy.signals.SignalHandlerOptions.ALL)
+        options = rclpy.signals.SignalHandlerOptions.NO if halt else rclpy.signals.SignalHandlerOptions.ALL
+        rclpy.init(args=argv, signal_handler_options=options)
     except RuntimeError as error:  # rcl cannot parse the --ros-args (e.g. a list mixing 0 and 0.3)
         reason = str(error).split(", at /")[0]
         if "same type" in reason:
@@ -246,6 +282,9 @@ def run_node(
     node = None
     exit_code = 0
     teardown_code = 1  # the exit code if teardown hangs: 1 unless spin ended as it should
+    started: dict = {}
+    if halt is not None:
+        _halt_then_shut_down(stop_signals, started, halt)
     try:
         try:
             node = make_node()
@@ -264,7 +303,13 @@ def run_node(
             try:  # a signal may land before spin() starts: the same clean stop
                 executor = SingleThreadedExecutor()
                 executor.add_node(node)
-                _wake_the_executor_once_stopped(stop_signals, node, executor)
+                if halt is None:
+                    _wake_the_executor_once_stopped(stop_signals, node, executor)
+                else:
+                    node.create_timer(SIGNAL_POLL_PERIOD_S, lambda: None)
+                    started.update(node=node, executor=executor)
+                    if stop_signals.received.is_set() and not node.context.ok():
+                        return 0
                 executor.spin()
             except (KeyboardInterrupt, ExternalShutdownException):
                 pass

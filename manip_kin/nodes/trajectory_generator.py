@@ -31,13 +31,16 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from nav_msgs.msg import Path
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from manip_kin.bounds import UNBOUNDED, InputBounds
 from manip_kin.errors import InvalidArgumentError, ManipKinError
 from manip_kin.joint_trajectory import JointTrajectoryPlan, plan_joint_trajectory
 from manip_kin.kinematics import frame_pose
+from manip_kin.line_timing import constant_scaling_problem, line_limits_problem
 from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import trajectory_points
 from manip_kin.nodes.params import LiveParameters, declare_parameters
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
@@ -57,13 +60,15 @@ class TrajectoryGeneratorNode(LoopingNode):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
         self.model = load_node_model(self, params)
+        limit_specs = joint_limit_parameters(self.model)
+        params.update(declare_parameters(self, limit_specs))
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
         self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
         self._params = params
         self.bounds = InputBounds.of(self.model)
         self._configure(params)
-        LiveParameters(self, PARAMETERS, self._set_parameters)
+        LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
@@ -73,6 +78,9 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", STREAM_DEPTH)
         self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", STREAM_DEPTH)
         self._reference_pub = self.create_publisher(JointState, "joint_reference", STREAM_DEPTH)
+        # The service only sets the flag; the loop stops the motion (one writer of the state).
+        self._stop_requested = False
+        self.create_service(Trigger, "~/stop", self._on_stop)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
         )
@@ -137,6 +145,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             max_angular_acceleration=params["max_angular_acceleration"],
         )
         _check_limits(limits, self.bounds)
+        self.joint_limits = joint_limits_from_params(self.model, params)
         self.limits = limits
         task = parse_task(params["task"] or None, self.model)
         self.time_scaling = params["time_scaling"]
@@ -219,7 +228,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             return None
         try:
             names, points = trajectory_points(msg)
-            plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling)
+            plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling, self.joint_limits)
         except ManipKinError as error:
             self._reject(msg, str(error))
             return None
@@ -249,11 +258,18 @@ class TrajectoryGeneratorNode(LoopingNode):
             goal[:3, :3] = start[:3, :3]  # orientation free: keep it, and do not time the line by a turn
         try:
             line = LineTrajectory.plan(start, goal, self.time_scaling, self.limits)
+            refused = constant_scaling_problem(line, self.joint_limits)
+            if refused:
+                self._reject(target_msg, refused)
+                return False
             if self.check_reach:
                 report = check_line_reachable(self.model, line, q, task=self.task)
                 if not report.reachable:
                     self._reject(target_msg, report.reason, "unreachable")
                     return False
+                too_fast = line_limits_problem(self.model, line, report, self.joint_limits)
+                if too_fast:
+                    self._warn("line:limits", too_fast)
         except ManipKinError as error:
             self._reject(target_msg, str(error))
             return False
@@ -294,9 +310,20 @@ class TrajectoryGeneratorNode(LoopingNode):
             self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, self._last_goal_pose))
             self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, np.zeros(3), np.zeros(3)))
 
+    def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._stop_requested = True
+        response.success = True
+        response.message = "stopping the stream; the last goal sent is held"
+        return response
+
     def _cycle(self, now_ns: int) -> None:
         target = self._take_inputs(now_ns)
         supervisor = self.supervisor
+        if self._stop_requested:
+            self._stop_requested = False
+            target = None
+            if supervisor.stop("stopped on request; holding the last goal sent"):
+                self.get_logger().info(f"{supervisor.motion_kind} stopped on request")
         if target is not None:
             started = self._plan_trajectory(target) if isinstance(target, JointTrajectory) else None
             if not isinstance(target, JointTrajectory):

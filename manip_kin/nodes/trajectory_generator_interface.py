@@ -6,6 +6,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 from __future__ import annotations
 
 from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS
+from manip_kin.nodes.joint_limit_params import HELP_LINE
 from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import GeneratorState
@@ -117,9 +118,13 @@ USAGE = usage_text(
     "streams goal_pose and goal_twist at rate_hz until the end, then\n"
     "publishes the final pose once and holds. A joint_trajectory (as ros2_control's\n"
     "JointTrajectoryController takes it) is interpolated with joint_time_scaling from the\n"
-    "current joint_states and streamed as joint_reference. The latest goal of either kind\n"
-    "pre-empts the running motion. Unreachable or malformed goals are rejected with a log line.",
+    "current joint_states and streamed as joint_reference, within joint_limits.<joint>.*\n"
+    "(velocity, acceleration, jerk); a single point at time_from_start 0 is timed as fast as\n"
+    "those limits allow. The latest goal of either kind pre-empts the running motion.\n"
+    "Unreachable or malformed goals are rejected with a log line.",
     PARAMETERS,
+    extra_help=HELP_LINE,
+    services=[("~/stop", "std_srvs/Trigger", "stop streaming; the last goal sent is held")],
     subscribes=[
         ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
         ("joint_trajectory", "trajectory_msgs/JointTrajectory", "joint names, points with time_from_start"),

@@ -12,9 +12,17 @@ None of these imports rclpy at import time (test/conftest.py sets the environmen
 from manip_kin.pipeline.client import PipelineClient, Status, normalize_namespace, status_name
 from manip_kin.pipeline.domain import ensure_ros_isolation, fresh_domain_env, pick_free_domain
 from manip_kin.pipeline.errors import PipelineError
-from manip_kin.pipeline.supervisor import PIPELINE_NODES, NodeProcess, Pipeline, find_executable, pipeline_processes
+from manip_kin.pipeline.supervisor import (
+    IRB120_LINE_GENERATOR,
+    PIPELINE_NODES,
+    NodeProcess,
+    Pipeline,
+    find_executable,
+    pipeline_processes,
+)
 
 __all__ = [
+    "IRB120_LINE_GENERATOR",
     "PIPELINE_NODES",
     "NodeProcess",
     "Pipeline",

@@ -23,6 +23,7 @@ import numpy as np
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.pipeline.domain import ensure_ros_isolation
 from manip_kin.pipeline.errors import PipelineError
+from manip_kin.pipeline.outcome import GoalOutcome, goal_outcome, taken
 
 #: Seconds without its node reporting a goal or line target of ours after which it is sent again.
 GOAL_RESEND_AFTER_S = 1.0
@@ -401,28 +402,83 @@ class PipelineClient:
     def wait_converged(
         self, goal_stamp: str, timeout: float = 30.0, controller: str = "cartesian_controller"
     ) -> tuple[bool, Status | None]:
-        """Wait until the controller reports ``converged`` on the goal stamped ``goal_stamp``.
+        """Wait until the controller reports how the goal stamped ``goal_stamp`` ended
+        (:func:`manip_kin.pipeline.outcome.goal_outcome`: converged, unreachable, blocked,
+        stopped, rejected), or ``timeout``.
 
         Returns:
             ``(converged, status)``: the first status that said converged on that goal, else
-            the last one about it; it has ``position_error`` [m] and ``orientation_error`` [rad].
+            the one that ended it, else the last one about it; it has ``position_error`` [m]
+            and ``orientation_error`` [rad]. :meth:`outcome` reads how it ended.
         """
         last: list[Status | None] = [None]
         key = self.status_name(controller)
 
         def done():
             status = self._statuses.get(key)
-            if status is None or status.values.get("goal_stamp") != goal_stamp:
+            if status is None or not taken(status.values, goal_stamp):
                 self._resend_unreported("goal_pose", goal_stamp, status.values.get("goal_stamp", "") if status else "")
                 return False
             last[0] = status
-            if status.message != "converged":
-                return False
-            last[0] = self._first_converged.get((key, goal_stamp), status)
-            return True
+            outcome = goal_outcome(status.values, status.message, goal_stamp)
+            if outcome.word == "converged":
+                last[0] = self._first_converged.get((key, goal_stamp), status)
+            return outcome.word not in ("", "paused")
 
-        converged = bool(self.spin_until(done, timeout))
-        return converged, last[0]
+        self.spin_until(done, timeout)
+        return self.outcome(last[0], goal_stamp).word == "converged", last[0]
+
+    @staticmethod
+    def outcome(status: Status | None, goal_stamp: str) -> GoalOutcome:
+        """How the goal ``goal_stamp`` ended according to ``status`` (``word`` "" if not yet)."""
+        return goal_outcome(status.values, status.message, goal_stamp) if status is not None else GoalOutcome("")
+
+    def wait_taken(self, goal_stamp: str, timeout: float = 10.0, controller: str = "cartesian_controller") -> Status:
+        """Wait until the controller reports ``goal_stamp`` as its goal (or as rejected); the
+        goal is sent again while it does not (see :meth:`_resend_unreported`).
+
+        Raises:
+            PipelineError: not reported within ``timeout``.
+        """
+        key = self.status_name(controller)
+
+        def reported():
+            status = self._statuses.get(key)
+            if status is not None and taken(status.values, goal_stamp):
+                return status
+            self._resend_unreported("goal_pose", goal_stamp, status.values.get("goal_stamp", "") if status else "")
+            return None
+
+        status = self.spin_until(reported, timeout)
+        if status is None:
+            raise PipelineError(f"{key} did not report taking goal {goal_stamp} within {timeout:g} s")
+        return status
+
+    def call_trigger(self, node_name: str, service: str, value: bool | None = None, timeout: float = 5.0) -> str:
+        """Call ``<namespace>/<node_name>/<service>``: std_srvs/Trigger, or std_srvs/SetBool with
+        ``value``; returns the node's message.
+
+        Raises:
+            PipelineError: no such service within ``timeout``, no answer, or the node refused.
+        """
+        from std_srvs.srv import SetBool, Trigger
+
+        name = f"{self.namespace}/{node_name}/{service}" if self.namespace else f"/{node_name}/{service}"
+        srv_type = Trigger if value is None else SetBool
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise PipelineError(f"no service {name} within {timeout:g} s (is {node_name} running?)")
+            request = srv_type.Request() if value is None else SetBool.Request(data=bool(value))
+            future = client.call_async(request)
+            if not self.spin_until(future.done, timeout):
+                raise PipelineError(f"{name} did not answer within {timeout:g} s")
+            response = future.result()
+            if not response.success:
+                raise PipelineError(f"{name} refused: {response.message}")
+            return response.message
+        finally:
+            self.node.destroy_client(client)
 
     def time_to_converge(self, goal_stamp: str, start: float, controller: str = "cartesian_controller") -> float:
         """Seconds from ``start`` (a ``time.monotonic()`` reading) until the controller first
@@ -465,13 +521,15 @@ class PipelineClient:
         sent.resends += 1
 
     def wait_line_done(
-        self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator"
+        self, target_stamp: str, timeout: float = 60.0, generator: str = "trajectory_generator", finished: bool = True
     ) -> Status:
-        """Wait until the generator finished (``holding``) or rejected the target ``target_stamp``.
+        """Wait until the generator finished (``holding``) or rejected the target ``target_stamp``
+        (with ``finished`` False: until it started or rejected it).
 
         Returns:
             The generator's status: ``message`` is ``holding`` (``final_goal_stamp`` set) or
-            ``rejected`` (``last_rejection`` says why; ``rejected_stamp`` is the target's).
+            ``rejected`` (``last_rejection`` says why; ``rejected_stamp`` is the target's);
+            ``streaming`` too when not ``finished``.
 
         Raises:
             PipelineError: neither within ``timeout``.
@@ -488,17 +546,22 @@ class PipelineClient:
                 return status
             reported = status.values.get("target_stamp", "")
             if reported == target_stamp:
-                return status if status.message == "holding" else None
+                return status if status.message == "holding" or not finished else None
             self._resend_unreported("line_target", target_stamp, reported)
             return None
 
         status = self.spin_until(done, timeout)
         if status is None:
             last = self._statuses.get(key)
+            what = "finished" if finished else "taken"
             raise PipelineError(
-                f"line not finished within {timeout:g} s (generator state: {last.message if last else 'no status'})"
+                f"target not {what} within {timeout:g} s (generator state: {last.message if last else 'no status'})"
             )
         return status
+
+    def wait_target_taken(self, target_stamp: str, timeout: float = 10.0, generator: str = "trajectory_generator"):
+        """:meth:`wait_line_done` until the generator started or rejected ``target_stamp``."""
+        return self.wait_line_done(target_stamp, timeout, generator, finished=False)
 
     def current_positions(self, timeout: float = 5.0) -> np.ndarray:
         """Newest ``joint_states`` positions (message order), waiting for one if needed."""

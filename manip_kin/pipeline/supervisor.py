@@ -121,6 +121,18 @@ class NodeProcess:
         return args
 
 
+#: The generator's settings of the irb120 line scenario (0.4 m/s, robots.md): a trapezoid that
+#: reaches the line speed in 0.4 s (0.08 m) at 1 m/s², so the cruise is the scenario's constant
+#: speed and the ends are not a velocity step. 2 m/s² needs 22.8 rad/s² of joint3 near the end
+#: of the line, above its default limit (21.8).
+IRB120_LINE_GENERATOR = {
+    "time_scaling": "trapezoidal",
+    "max_linear_velocity": 0.4,
+    "max_linear_acceleration": 1.0,
+    "max_angular_velocity": 1.0,
+}
+
+
 def pipeline_processes(
     robot: str = "genova7",
     rate_hz: float = 500.0,

@@ -1,0 +1,200 @@
+"""cartesian_controller on an arm that holds its last command: limits in every case, honest failure.
+
+The arm is test/fake_hardware.py holding every command it gets (as ros2_control's
+JointGroupVelocityController does), so a command stream that jumps would jump the arm, and one
+that does not end in a zero would leave it moving. Each expectation is computed here: the
+finite differences of the stream the arm received against the limits, the arm's own pose
+(FK of its positions), a numeric Jacobian's singular values.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from fake_hardware import FakeHardware
+from geometry_msgs.msg import PoseStamped
+from kin_reference import numeric_geometric_jacobian
+from node_harness import Harness, statuses
+from std_srvs.srv import SetBool, Trigger
+
+from manip_kin.joint_limits import JointLimits
+from manip_kin.kinematics import frame_pose
+from manip_kin.nodes import conversions as conv
+from manip_kin.nodes.cartesian_controller import CartesianControllerNode
+from manip_kin.robots import load_robot
+from manip_kin.rotations import make_transform, rpy_to_matrix
+from manip_kin.urdf import model_to_urdf
+
+RATE = 250.0
+SLACK = 1e-6  # relative, on the limits: the stream's values are what ruckig computed, rounded
+
+
+@pytest.fixture
+def harness():
+    h = Harness()
+    yield h
+    h.close()
+
+
+def _arm(harness, robot: str, q0, **params):
+    model = load_robot(robot)
+    hardware = FakeHardware(
+        model_to_urdf(model), q0, rate_hz=2 * RATE, command_timeout=math.inf, command_topic="/joint_velocity_commands"
+    )
+    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
+    params.setdefault("joint_state_timeout", 0.3)
+    node = harness.start(CartesianControllerNode, robot=robot, rate_hz=RATE, **params)
+    harness.executor.add_node(node)  # serve its ~/stop and ~/pause
+    harness.wait_matched("goal_pose", PoseStamped)
+    assert harness.spin_until(lambda: node.q is not None, 5)
+    return model, hardware, node, diagnostics
+
+
+def _send(harness, pose, frame="base_link"):
+    msg = conv.make_pose_stamped(pose, frame, harness.node.get_clock().now().to_msg())
+    harness.publish("goal_pose", msg)
+    return conv.stamp_key(msg.header.stamp)
+
+
+def _call(harness, srv_type, name, request):
+    client = harness.node.create_client(srv_type, name)
+    assert client.wait_for_service(timeout_sec=5)
+    future = client.call_async(request)
+    assert harness.spin_until(future.done, 5)
+    return future.result()
+
+
+def _speed(hardware) -> float:
+    """The largest joint rate the arm moves on now."""
+    command = hardware.held_command()
+    return 0.0 if command is None else float(np.max(np.abs(command)))
+
+
+def assert_stream_within(commands: np.ndarray, limits: JointLimits, dt: float) -> None:
+    """Every command's finite-difference acceleration and jerk within the limits."""
+    stream = np.vstack([np.zeros((2, commands.shape[1])), commands])
+    acceleration = np.diff(stream, axis=0) / dt
+    jerk = np.diff(acceleration, axis=0) / dt
+    ratio_a = np.max(np.abs(acceleration) / limits.acceleration)
+    ratio_j = np.max(np.abs(jerk) / limits.jerk)
+    assert ratio_a <= 1 + SLACK and ratio_j <= 1 + SLACK, (ratio_a, ratio_j)
+
+
+def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
+    """A goal, a reversal, a pause, a resume, a stale joint state and a stop: the stream the arm
+    received stays within the acceleration and jerk limits cycle to cycle, and ends in zeros."""
+    model, hardware, node, _ = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    try:
+        limits = JointLimits.of(model)
+        start = frame_pose(model, hardware.positions())
+        away = start.copy()
+        away[:3, 3] += [0.05, -0.1, 0.08]
+        _send(harness, away)
+        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
+        harness.spin_for(0.15)
+        _send(harness, start)  # reversal
+        harness.spin_for(0.3)
+        assert _call(harness, SetBool, "/cartesian_controller/pause", SetBool.Request(data=True)).success
+        assert harness.spin_until(lambda: node.state == "paused" and not np.any(hardware.held_command()), 3)
+        q_paused = hardware.positions()
+        harness.spin_for(0.2)
+        np.testing.assert_array_equal(hardware.positions(), q_paused)  # held still, exactly
+        _call(harness, SetBool, "/cartesian_controller/pause", SetBool.Request(data=False))
+        _send(harness, away)
+        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
+        hardware.publishing = False  # the driver goes quiet: stale input, come to rest
+        assert harness.spin_until(lambda: node.state == "stale input" and node.command_filter.at_rest, 3)
+        hardware.publishing = True
+        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
+        assert _call(harness, Trigger, "/cartesian_controller/stop", Trigger.Request()).success
+        assert harness.spin_until(lambda: node.state == "stopped" and not np.any(hardware.held_command()), 3)
+        assert node.supervisor.goal_kind is None  # the goal was dropped
+        commands = np.array([values for _, values in hardware.commands])
+        assert_stream_within(commands, limits, 1.0 / RATE)
+        assert np.max(np.abs(commands)) > 0.05  # it did move
+        assert not np.any(commands[-1])
+    finally:
+        hardware.close()
+
+
+def test_a_goal_after_a_stop_is_followed_and_converges(harness):
+    model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    try:
+        _call(harness, Trigger, "/cartesian_controller/stop", Trigger.Request())
+        assert harness.spin_until(lambda: node.state == "stopped", 3)
+        goal = frame_pose(model, hardware.positions())
+        goal[:3, 3] += [0.0, 0.0, 0.03]
+        stamp = _send(harness, goal)
+        assert harness.spin_until(lambda: node.state == "converged", 10)
+        np.testing.assert_allclose(frame_pose(model, hardware.positions())[:3, 3], goal[:3, 3], atol=2e-4)
+        assert any(
+            s.values and dict((kv.key, kv.value) for kv in s.values)["goal_stamp"] == stamp
+            for s in statuses(diagnostics, "cartesian_controller")
+        )
+    finally:
+        hardware.close()
+
+
+def _unreachable(harness, robot, q0, goal, **params):
+    model, hardware, node, diagnostics = _arm(harness, robot, q0, **params)
+    try:
+        _send(harness, goal)
+        assert harness.spin_until(lambda: node.state == "unreachable", 8), (node.state, node.detail)
+        assert harness.spin_until(lambda: node.command_filter.at_rest and not np.any(hardware.held_command()), 2)
+        q = hardware.positions()
+        harness.spin_for(0.2)
+        np.testing.assert_array_equal(hardware.positions(), q)  # at rest
+        commands = np.array([values for _, values in hardware.commands])
+        assert_stream_within(commands, JointLimits.of(model), 1.0 / RATE)
+        reported = [dict((kv.key, kv.value) for kv in s.values) for s in statuses(diagnostics, "cartesian_controller")]
+        return model, q, node.detail, reported[-1]
+    finally:
+        hardware.close()
+
+
+def test_a_goal_out_of_reach_of_a_stretched_arm_is_unreachable_and_singular(harness):
+    irb120 = load_robot("irb120")
+    goal = make_transform(np.eye(3), [0.95, 0.0, 0.63])  # the arm spans 0.64 m from its shoulder
+    model, q, detail, status = _unreachable(harness, "irb120", np.zeros(6), goal, task="position")
+    assert "goal out of reach" in detail and "stretched and singular" in detail, detail
+    # Independently: the position Jacobian at the final configuration is (nearly) rank deficient.
+    jacobian = numeric_geometric_jacobian(lambda x: frame_pose(irb120, x), q)[3:]
+    singular_values = np.linalg.svd(jacobian, compute_uv=False)
+    assert singular_values[-1] < 0.02
+    # The closest pose reached is the one reported.
+    distance = np.linalg.norm(goal[:3, 3] - frame_pose(irb120, q)[:3, 3])
+    reported = float(status["unreachable_errors"].split()[0])
+    assert reported == pytest.approx(distance, abs=1e-3)
+
+
+def test_a_goal_beyond_a_joint_limit_is_unreachable_naming_the_joint(harness):
+    scara = load_robot("scara")  # the prismatic joint3 moves the tool along z in [0, 0.5] m
+    q0 = np.array([0.3, 0.6, 0.2, 0.0])
+    goal = frame_pose(scara, q0)
+    goal[2, 3] = 0.8
+    model, q, detail, _ = _unreachable(harness, "scara", q0, goal, task="position")
+    assert "joints at their limits: joint3" in detail, detail
+    assert q[2] == pytest.approx(scara.upper[2], abs=1e-3)
+    np.testing.assert_allclose(frame_pose(scara, q)[:2, 3], goal[:2, 3], atol=1e-3)  # the rest was reached
+
+
+def test_a_goal_rejected_for_its_frame_is_reported_with_the_reason(harness):
+    model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    try:
+        stamp = _send(harness, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
+        assert harness.spin_until(lambda: node.rejected_stamp == stamp, 3)
+        assert "'world'" in node.last_rejection and "base_link" in node.last_rejection
+
+        def reported():
+            for s in statuses(diagnostics, "cartesian_controller"):
+                values = dict((kv.key, kv.value) for kv in s.values)
+                if values.get("rejected_stamp") == stamp:
+                    return values
+            return None
+
+        values = harness.spin_until(reported, 3)
+        assert values and "not the base frame" in values["last_rejection"]
+        assert values["base_frame"] == "base_link"
+    finally:
+        hardware.close()
