@@ -101,11 +101,11 @@ def test_controller_gains_set_at_run_time_change_the_commands(harness):
 @pytest.mark.parametrize(
     ("name", "value", "words"),
     [
-        ("gain_linear", -1.0, "gain_linear = -1; valid: >= 0"),
+        ("gain_linear", -1.0, "gain_linear = -1; valid: 0 to 1000 1/s"),
         ("gain_angular", float("nan"), "valid: a finite number"),
-        ("singular_threshold", 0.0, "valid: > 0"),
+        ("singular_threshold", 0.0, "valid: 1e-06 to 10"),
         ("position_tolerance", "tight", "wrong type"),
-        ("goal_timeout", -0.5, "valid: >= 0 s"),
+        ("goal_timeout", -0.5, "valid: 0 to 86400 s"),
         ("rate_hz", 50.0, "read-only"),
         ("robot", "irb120", "read-only"),
         ("tip_link", "ee", "read-only"),

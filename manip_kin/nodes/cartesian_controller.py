@@ -29,7 +29,7 @@ from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
 from manip_kin.nodes.joint_messages import JointReferenceReader
-from manip_kin.nodes.params import LiveParameters, declare_parameters
+from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
@@ -138,7 +138,7 @@ class CartesianControllerNode(LoopingNode):
         )
         controller = CartesianController(self.model, config)
         supervisor_config = self._supervisor_config(params, controller)
-        diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        diagnostics_period_ns = period_ns(params["diagnostics_rate_hz"])
         if hasattr(self, "supervisor"):
             self.supervisor.reconfigure(supervisor_config, diagnostics_period_ns)
         self.controller = controller

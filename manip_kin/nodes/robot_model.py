@@ -51,6 +51,8 @@ def model_parameters(robot_default: str) -> tuple[ParamSpec, ...]:
             None,
             "joint velocity limits, model joint order, replacing the model's (for URDFs without limits)",
             "rad/s | m/s",
+            minimum=1e-3,  # 1 mrad/s to 1000 rad/s: slower is no motion, faster no arm; the rates
+            maximum=1e3,  # the limits bound (1/limit, 100 x limit) stay finite
             default_text="the model's; none where the URDF gives none",
         ),
     )

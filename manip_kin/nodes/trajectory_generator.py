@@ -39,7 +39,7 @@ from manip_kin.joint_trajectory import JointTrajectoryPlan, plan_joint_trajector
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.joint_messages import trajectory_points
-from manip_kin.nodes.params import LiveParameters, declare_parameters
+from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
@@ -59,7 +59,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.model = load_node_model(self, params)
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
-        self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
+        self.supervisor = GeneratorSupervisor(period_ns(params["diagnostics_rate_hz"]))
         self._params = params
         self.bounds = InputBounds.of(self.model)
         self._configure(params)
@@ -146,7 +146,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._path_points = max(2, params["path_points"])
-        self.supervisor.throttle.period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        self.supervisor.throttle.period_ns = period_ns(params["diagnostics_rate_hz"])
 
     def _set_parameters(self, updates: dict) -> str | None:
         """Live change of tunable parameters: None once in use (from the next line on), else why not."""
