@@ -169,3 +169,48 @@ def test_generator_limits_set_at_run_time_time_the_next_line(harness):
     refused = params.set(every=stream, time_scaling="bang-bang")
     assert not refused.successful and "trapezoidal" in refused.reason
     assert node.limits.max_linear_velocity == 0.1 and node.time_scaling == "constant"
+
+
+def test_hostile_values_through_the_parameter_services_are_refused_briefly_and_the_node_runs_on(harness):
+    node, commands, stream = _start_controller(harness)
+    params = Parameters(harness, "cartesian_controller")
+    harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
+    assert harness.spin_until(lambda: node.state == "tracking", 5, every=stream)
+    controller = node.controller
+    for name, value in (
+        ("damping_max", 1e200),  # used to raise OverflowError in the service: no answer, exit 1
+        ("singular_threshold", 1e308),
+        ("diagnostics_rate_hz", 1e-300),  # used to kill the loop: int(1e9 / rate) overflowed
+        ("gain_linear", 1e308),  # used to make the commands NaN
+        ("gain_angular", "1.5"),  # a string is not a number
+        ("gain_linear", [0.5] * 100_000),  # used to echo the whole array (500 kB)
+        ("gain_linear", True),
+    ):
+        result = params.set(every=stream, **{name: value})
+        assert not result.successful, (name, value)
+        assert f"parameter {name} = " in result.reason and "valid: " in result.reason, result.reason
+        assert len(result.reason) < 200, result.reason
+    assert node.controller is controller and node.controller.config.gain_linear == 1.0
+    cycles = node.loop.stats().cycles
+    count = len(commands)
+    harness.spin_for(0.3, every=stream)
+    assert node.loop.stats().cycles > cycles and node.loop_error() == ""
+    assert len(commands) > count and all(np.all(np.isfinite(c.data)) for c in commands)
+    assert params.set(every=stream, gain_linear=2.0).successful  # the services still work
+
+
+def test_generator_refuses_hostile_planning_values_and_plans_on(harness):
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=RATE)
+    harness.executor.add_node(node)
+    params = Parameters(harness, "trajectory_generator")
+    for name, value in (
+        ("path_points", "50"),
+        ("path_points", 10**12),  # used to be accepted: MemoryError on the next line
+        ("max_linear_velocity", 1e-300),  # an infinite line duration
+        ("diagnostics_rate_hz", 1e-300),
+    ):
+        result = params.set(**{name: value})
+        assert not result.successful and f"parameter {name} = " in result.reason, result.reason
+        assert len(result.reason) < 200, result.reason
+    assert node._path_points == 50 and node.loop_error() == ""
+    assert params.set(path_points=10000).successful and node._path_points == 10000
