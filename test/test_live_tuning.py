@@ -15,6 +15,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.control import CartesianController, ControllerConfig
+from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller import CartesianControllerNode
@@ -214,3 +215,10 @@ def test_generator_refuses_hostile_planning_values_and_plans_on(harness):
         assert len(result.reason) < 200, result.reason
     assert node._path_points == 50 and node.loop_error() == ""
     assert params.set(path_points=10000).successful and node._path_points == 10000
+
+
+@pytest.mark.parametrize(("name", "value"), [("gain_linear", "1.5"), ("damping_max", 1e200), ("rate_hz", 1e-300)])
+def test_a_hostile_value_at_start_is_one_bounded_input_error(harness, name, value):
+    with pytest.raises(InvalidArgumentError, match=f"parameter {name} = .*; valid: ") as error:
+        harness.start(CartesianControllerNode, robot="genova7", **{name: value})
+    assert len(str(error.value)) < 200
