@@ -47,6 +47,8 @@ MAX_SETTLE_S = 2.0
 WAIT_LOG_PERIOD_S = 10.0
 #: Period of the check for a new description while running [s].
 FOLLOW_PERIOD_S = 0.5
+#: Checks after a message whose sender is not on the graph (yet, or any more).
+CHECK_RETRIES = 6
 #: Publishers named in one message at most.
 MAX_NAMED = 8
 
@@ -133,11 +135,13 @@ class DescriptionWatch:
 
     # --- what is there -----------------------------------------------------------------------------
 
-    def poll(self) -> None:
-        """Take every message that arrived (the newest per publisher is kept)."""
+    def poll(self) -> bool:
+        """Take every message that arrived (the newest per publisher is kept); True when any did."""
         from rclpy.serialization import deserialize_message
 
+        arrived = False
         while (taken := self._subscription.take()) is not None:
+            arrived = True
             gid, data = taken
             try:
                 text = deserialize_message(data, self._string).data
@@ -145,6 +149,7 @@ class DescriptionWatch:
                 continue
             digest = _digest(text)
             self._latest[gid if gid is not None else digest] = (text, digest)
+        return arrived
 
     def current(self) -> list[Description]:
         """The newest description of each publisher still on the graph (all received ones when
@@ -257,6 +262,7 @@ class DescriptionWatch:
         self._load = load
         self._switch = switch
         self._warned = {running.publisher: running.digest}
+        self._retries = 1  # the descriptions already taken while waiting are checked at once
         self._node.create_timer(FOLLOW_PERIOD_S, self._check)
         self._node.create_service(Trigger, SERVICE, self._reload)
 
@@ -265,16 +271,31 @@ class DescriptionWatch:
         self._subscription.destroy()
 
     def _check(self) -> None:
-        """Timer: log each description that differs from the running one, once."""
+        """Timer: log each description that differs from the running one, once.
+
+        Works only when a message came (or, a few times, when a sender was not yet on the graph).
+        """
         try:
-            self.poll()
-            for description in self.current():
+            if not self.poll() and self._retries <= 0:
+                return
+            descriptions = self.current()
+            unresolved = len(descriptions) < len(self._latest)
+            self._retries = (self._retries - 1 if self._retries > 0 else CHECK_RETRIES) if unresolved else 0
+            if unresolved and self._retries == 0:
+                self._forget_gone()
+            for description in descriptions:
                 if description.digest in (self.running.digest, self._warned.get(description.publisher)):
                     continue
                 self._warned[description.publisher] = description.digest
                 self._node.get_logger().warning(self._difference(description))
         except Exception as error:  # noqa: BLE001 - a watch must never end the executor
             self._node.get_logger().error(f"checking {self.topic} failed: {type(error).__name__}: {error}"[:400])
+
+    def _forget_gone(self) -> None:
+        """Drop the descriptions of publishers no longer on the graph (memory stays bounded)."""
+        if self._subscription.attributed:
+            present = self._subscription.publishers()
+            self._latest = {gid: value for gid, value in self._latest.items() if gid in present}
 
     def _difference(self, description: Description) -> str:
         """The WARN line for a description that differs from the running one."""
