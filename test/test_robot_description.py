@@ -181,3 +181,16 @@ def test_without_publisher_gids_different_urdfs_are_still_refused(harness, publi
     message = str(error.value)
     assert "2 different robot descriptions" in message and "/arm_a, /arm_b" in message, message
     assert "cannot tell which node sent which (rcl not found (test))" in message
+
+
+def test_the_generator_switches_on_request_to_the_same_joints(harness, publishers):
+    publishers.publish("arm_b", IRB)
+    node = harness.start(TrajectoryGeneratorNode, rate_hz=100.0)
+    harness.executor.add_node(node)
+    publishers.publish("arm_b", SLOW_IRB)
+    harness.spin_for(0.3)
+    assert node.model.name == "irb120"  # not replaced until asked
+    reply = _reload(harness, "trajectory_generator")
+    assert reply.success and "to 'irb120_slow'" in reply.message, reply.message
+    np.testing.assert_allclose(node.model.velocity_limits, IRB.velocity_limits * 0.5)
+    assert node.bounds.max_twist_linear < type(node.bounds).of(IRB).max_twist_linear
