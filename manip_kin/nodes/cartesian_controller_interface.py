@@ -188,6 +188,9 @@ USAGE = usage_text(
     "instead (q_dot = q_dot_ref + gain_joint (q_ref - q), within the limits); the latest goal\n"
     "of either kind wins. Convergence counts only the task's components.\n"
     "Without a goal, or without a joint state for joint_state_timeout, it publishes zeros.\n"
+    "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
+    "one of several); a later, different one is logged, and the service\n"
+    "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
     subscribes=[

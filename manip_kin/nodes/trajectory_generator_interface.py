@@ -130,7 +130,10 @@ USAGE = usage_text(
     "publishes the final pose once and holds. A joint_trajectory (as ros2_control's\n"
     "JointTrajectoryController takes it) is interpolated with joint_time_scaling from the\n"
     "current joint_states and streamed as joint_reference. The latest goal of either kind\n"
-    "pre-empts the running motion. Unreachable or malformed goals are rejected with a log line.",
+    "pre-empts the running motion. Unreachable or malformed goals are rejected with a log line.\n"
+    "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
+    "one of several); a later, different one is logged, and the service\n"
+    "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.",
     PARAMETERS,
     subscribes=[
         ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
