@@ -14,10 +14,12 @@ from hypothesis import strategies as st
 
 from manip_kin.control import CartesianController, ControllerConfig
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.joint_control import joint_tracking_step
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import cartesian_controller_interface, robot_state, trajectory_generator_interface
 from manip_kin.nodes.params import QUOTE_LENGTH, ParamSpec, period_ns
 from manip_kin.robots import load_robot
+from manip_kin.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.supervisors import StatusThrottle
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits
 
@@ -291,3 +293,56 @@ def test_lines_planned_with_any_valid_limits_have_finite_timing_and_samples(
     if count <= 500:  # the full range is covered by the bounds test; keep this one fast
         path = line.sample_path(count)
         assert len(path) == count and np.all(np.isfinite(path))
+
+
+@settings(max_examples=150)
+@given(
+    robot=st.sampled_from(sorted(ROBOTS)),
+    gain=in_range(CONTROLLER["gain_joint"]),
+    rate=in_range(CONTROLLER["rate_hz"]),
+    latency=in_range(CONTROLLER["command_latency"]),
+    q_fractions=st.lists(unit, min_size=7, max_size=7),
+    reference_fractions=st.lists(unit, min_size=7, max_size=7),
+    velocity_fractions=st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7),
+    age_periods=st.floats(-1.0, 20.0),
+    respect_position_limits=st.booleans(),
+)
+def test_the_joint_law_and_the_state_prediction_are_finite_for_every_valid_gain_rate_and_latency(
+    robot,
+    gain,
+    rate,
+    latency,
+    q_fractions,
+    reference_fractions,
+    velocity_fractions,
+    age_periods,
+    respect_position_limits,
+):
+    model = ROBOTS[robot]
+    dt = 1.0 / CONTROLLER["rate_hz"].coerce(rate)
+    q = _configuration(model, q_fractions)
+    velocities = np.asarray(velocity_fractions[: model.dof]) * model.velocity_limits
+    # The node's prediction (cartesian_controller.law_positions) with the latency parameter.
+    predicted = state_for_command(
+        q,
+        velocities,
+        age_periods * dt,
+        dt,
+        CONTROLLER["command_latency"].coerce(latency),
+        model.lower.tolist(),
+        model.upper.tolist(),
+        (PLAUSIBLE_RATE_FACTOR * model.velocity_limits).tolist(),
+    )
+    assert np.all(np.isfinite(predicted))
+    output = joint_tracking_step(
+        model,
+        np.asarray(predicted),
+        _configuration(model, reference_fractions),
+        velocities,
+        CONTROLLER["gain_joint"].coerce(gain),
+        dt,
+        respect_position_limits,
+        True,
+    )
+    assert np.all(np.isfinite(output.qdot))
+    assert np.all(np.abs(output.qdot) <= model.velocity_limits * (1 + 1e-9))
