@@ -49,6 +49,7 @@ class FakeHardware:
         rate_hz: integration and joint-state rate [Hz].
         command_timeout: a command older than this counts as zero [s] (math.inf: held forever).
         command_topic: where the commands come from.
+        namespace: the node's namespace (relative topics resolve in it).
     """
 
     def __init__(
@@ -58,6 +59,7 @@ class FakeHardware:
         rate_hz: float = 200.0,
         command_timeout: float = 0.1,
         command_topic: str = COMMAND_TOPIC,
+        namespace: str = "/",
     ):
         self.joint_names = urdf_arm_joints(urdf_text)
         self.q = np.array(q0, dtype=float)
@@ -77,7 +79,7 @@ class FakeHardware:
         self.history: list[np.ndarray] = []
         self._context = rclpy.Context()
         rclpy.init(context=self._context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("fake_hardware", context=self._context)
+        self.node = rclpy.create_node("fake_hardware", namespace=namespace, context=self._context)
         latched = QoSProfile(
             depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
         )

@@ -28,9 +28,11 @@ class Harness:
         self.nodes = []
         self._publishers = {}
 
-    def start(self, node_class, **parameters):
+    def start(self, node_class, namespace: str | None = None, **parameters):
+        """Start ``node_class`` with these parameters, in ``namespace`` if given."""
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
-        node = node_class(context=self.context, parameter_overrides=overrides)
+        extra = {"namespace": namespace} if namespace else {}
+        node = node_class(context=self.context, parameter_overrides=overrides, **extra)
         self.nodes.append(node)
         return node
 

@@ -32,7 +32,7 @@ def _default_text(spec) -> str:
 
 
 @pytest.mark.parametrize("module", [robot_state, cartesian_controller, trajectory_generator])
-def test_every_node_parameter_is_documented_with_default_unit_and_liveness(module):
+def test_every_node_parameter_is_documented_with_default_unit_liveness_and_range(module):
     rows = {}
     for line in _section(module.NODE_NAME).splitlines():
         cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
@@ -41,10 +41,11 @@ def test_every_node_parameter_is_documented_with_default_unit_and_liveness(modul
     missing = [spec.name for spec in module.PARAMETERS if spec.name not in rows]
     assert not missing, f"{module.NODE_NAME} parameters not in docs/interfaces.md: {missing}"
     for spec in module.PARAMETERS:
-        _, kind, default, unit, live, _ = rows[spec.name][:6]
+        _, kind, default, unit, live, valid = rows[spec.name][:6]
         assert kind == spec.kind and default == _default_text(spec), (spec.name, rows[spec.name])
         assert unit == spec.unit.replace(" | ", " or "), (spec.name, unit)
         assert live == ("yes" if spec.tunable else "no"), (spec.name, live)
+        assert valid == spec.constraint_text(), (spec.name, valid)
     extra = set(rows) - {spec.name for spec in module.PARAMETERS}
     assert not extra, f"documented but not declared by {module.NODE_NAME}: {extra}"
 

@@ -15,6 +15,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.control import CartesianController, ControllerConfig
+from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller import CartesianControllerNode
@@ -101,11 +102,11 @@ def test_controller_gains_set_at_run_time_change_the_commands(harness):
 @pytest.mark.parametrize(
     ("name", "value", "words"),
     [
-        ("gain_linear", -1.0, "gain_linear = -1; valid: >= 0"),
+        ("gain_linear", -1.0, "gain_linear = -1; valid: 0 to 1000 1/s"),
         ("gain_angular", float("nan"), "valid: a finite number"),
-        ("singular_threshold", 0.0, "valid: > 0"),
+        ("singular_threshold", 0.0, "valid: 1e-06 to 10"),
         ("position_tolerance", "tight", "wrong type"),
-        ("goal_timeout", -0.5, "valid: >= 0 s"),
+        ("goal_timeout", -0.5, "valid: 0 to 86400 s"),
         ("rate_hz", 50.0, "read-only"),
         ("robot", "irb120", "read-only"),
         ("tip_link", "ee", "read-only"),
@@ -176,3 +177,55 @@ def test_generator_limits_set_at_run_time_time_the_next_line(harness):
     refused = params.set(every=stream, time_scaling="bang-bang")
     assert not refused.successful and "trapezoidal" in refused.reason
     assert node.limits.max_linear_velocity == 0.1 and node.time_scaling == "constant"
+
+
+def test_hostile_values_through_the_parameter_services_are_refused_briefly_and_the_node_runs_on(harness):
+    node, commands, stream = _start_controller(harness)
+    params = Parameters(harness, "cartesian_controller")
+    harness.publish("/goal_pose", conv.make_pose_stamped(GOAL, "base_link"))
+    assert harness.spin_until(lambda: node.state == "tracking", 5, every=stream)
+    controller = node.controller
+    for name, value in (
+        ("damping_max", 1e200),  # used to raise OverflowError in the service: no answer, exit 1
+        ("singular_threshold", 1e308),
+        ("diagnostics_rate_hz", 1e-300),  # used to kill the loop: int(1e9 / rate) overflowed
+        ("gain_linear", 1e308),  # used to make the commands NaN
+        ("gain_angular", "1.5"),  # a string is not a number
+        ("gain_linear", [0.5] * 100_000),  # used to echo the whole array (500 kB)
+        ("gain_linear", True),
+    ):
+        result = params.set(every=stream, **{name: value})
+        assert not result.successful, (name, value)
+        assert f"parameter {name} = " in result.reason and "valid: " in result.reason, result.reason
+        assert len(result.reason) < 200, result.reason
+    assert node.controller is controller and node.controller.config.gain_linear == 1.0
+    cycles = node.loop.stats().cycles
+    count = len(commands)
+    harness.spin_for(0.3, every=stream)
+    assert node.loop.stats().cycles > cycles and node.loop_error() == ""
+    assert len(commands) > count and all(np.all(np.isfinite(c.data)) for c in commands)
+    assert params.set(every=stream, gain_linear=2.0).successful  # the services still work
+
+
+def test_generator_refuses_hostile_planning_values_and_plans_on(harness):
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", rate_hz=RATE)
+    harness.executor.add_node(node)
+    params = Parameters(harness, "trajectory_generator")
+    for name, value in (
+        ("path_points", "50"),
+        ("path_points", 10**12),  # used to be accepted: MemoryError on the next line
+        ("max_linear_velocity", 1e-300),  # an infinite line duration
+        ("diagnostics_rate_hz", 1e-300),
+    ):
+        result = params.set(**{name: value})
+        assert not result.successful and f"parameter {name} = " in result.reason, result.reason
+        assert len(result.reason) < 200, result.reason
+    assert node._path_points == 50 and node.loop_error() == ""
+    assert params.set(path_points=10000).successful and node._path_points == 10000
+
+
+@pytest.mark.parametrize(("name", "value"), [("gain_linear", "1.5"), ("damping_max", 1e200), ("rate_hz", 1e-300)])
+def test_a_hostile_value_at_start_is_one_bounded_input_error(harness, name, value):
+    with pytest.raises(InvalidArgumentError, match=f"parameter {name} = .*; valid: ") as error:
+        harness.start(CartesianControllerNode, robot="genova7", **{name: value})
+    assert len(str(error.value)) < 200

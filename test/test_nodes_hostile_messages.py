@@ -151,8 +151,12 @@ def test_generator_refuses_absurd_speed_limits(harness):
     from manip_kin.errors import InvalidArgumentError
 
     bounds = InputBounds.of(load_robot("irb120"))
-    with pytest.raises(InvalidArgumentError, match="max_linear_velocity = 1e\\+30 is absurd for this arm; valid: <="):
+    with pytest.raises(InvalidArgumentError, match="max_linear_velocity = 1e\\+30; valid: 0.0001 to 10 m/s"):
         harness.start(TrajectoryGeneratorNode, robot="irb120", max_linear_velocity=1e30)
+    # Within the parameter's range (up to 100 rad/s) but beyond twice what this arm can do.
+    assert bounds.max_twist_angular < 80.0
+    with pytest.raises(InvalidArgumentError, match="max_angular_velocity = 80 is absurd for this arm; valid: <="):
+        harness.start(TrajectoryGeneratorNode, robot="irb120", max_angular_velocity=80.0)
     # At the bound itself the node starts.
-    node = harness.start(TrajectoryGeneratorNode, robot="irb120", max_linear_velocity=bounds.max_twist_linear)
-    assert node.limits.max_linear_velocity == bounds.max_twist_linear
+    node = harness.start(TrajectoryGeneratorNode, robot="irb120", max_angular_velocity=bounds.max_twist_angular)
+    assert node.limits.max_angular_velocity == bounds.max_twist_angular

@@ -186,7 +186,7 @@ def test_param_spec_coercion():
         rate.coerce(True)
     positions = ParamSpec("initial_positions", "float_list", None, "q")
     assert positions.coerce([0, 1, 2]) == [0.0, 1.0, 2.0] and positions.coerce(None) is None
-    with pytest.raises(InvalidArgumentError, match="NaN"):
+    with pytest.raises(InvalidArgumentError, match=r"= \[nan\]; valid: finite numbers"):
         positions.coerce([float("nan")])
     scaling = ParamSpec("time_scaling", "str", "cubic", "s", choices=("cubic", "quintic"))
     with pytest.raises(InvalidArgumentError, match="valid: cubic, quintic"):

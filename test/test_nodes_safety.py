@@ -7,7 +7,9 @@ finite differences of the stream the arm received against the limits, the arm's 
 (FK of its positions), a numeric Jacobian's singular values.
 """
 
+import itertools
 import math
+import os
 
 import numpy as np
 import pytest
@@ -27,6 +29,7 @@ from manip_kin.rotations import make_transform, rpy_to_matrix
 from manip_kin.urdf import model_to_urdf
 
 RATE = 250.0
+_arms = itertools.count()
 SLACK = 1e-6  # relative, on the limits: the stream's values are what ruckig computed, rounded
 
 
@@ -38,22 +41,31 @@ def harness():
 
 
 def _arm(harness, robot: str, q0, **params):
+    """The fake arm and the controller in a namespace of their own: no other test's node can
+    add to the command stream the arm records."""
     model = load_robot(robot)
+    namespace = f"/safety_{os.getpid()}_{next(_arms)}"
     hardware = FakeHardware(
-        model_to_urdf(model), q0, rate_hz=2 * RATE, command_timeout=math.inf, command_topic="/joint_velocity_commands"
+        model_to_urdf(model),
+        q0,
+        rate_hz=2 * RATE,
+        command_timeout=math.inf,
+        command_topic="joint_velocity_commands",
+        namespace=namespace,
     )
     diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
     params.setdefault("joint_state_timeout", 0.3)
-    node = harness.start(CartesianControllerNode, robot=robot, rate_hz=RATE, **params)
+    node = harness.start(CartesianControllerNode, namespace=namespace, robot=robot, rate_hz=RATE, **params)
     harness.executor.add_node(node)  # serve its ~/stop and ~/pause
-    harness.wait_matched("goal_pose", PoseStamped)
+    node.test_namespace = namespace
+    harness.wait_matched(f"{namespace}/goal_pose", PoseStamped)
     assert harness.spin_until(lambda: node.q is not None, 5)
     return model, hardware, node, diagnostics
 
 
-def _send(harness, pose, frame="base_link"):
+def _send(harness, node, pose, frame="base_link"):
     msg = conv.make_pose_stamped(pose, frame, harness.node.get_clock().now().to_msg())
-    harness.publish("goal_pose", msg)
+    harness.publish(f"{node.test_namespace}/goal_pose", msg)
     return conv.stamp_key(msg.header.stamp)
 
 
@@ -90,24 +102,26 @@ def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
         start = frame_pose(model, hardware.positions())
         away = start.copy()
         away[:3, 3] += [0.05, -0.1, 0.08]
-        _send(harness, away)
+        _send(harness, node, away)
         assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
         harness.spin_for(0.15)
-        _send(harness, start)  # reversal
+        _send(harness, node, start)  # reversal
         harness.spin_for(0.3)
-        assert _call(harness, SetBool, "/cartesian_controller/pause", SetBool.Request(data=True)).success
+        assert _call(
+            harness, SetBool, f"{node.test_namespace}/cartesian_controller/pause", SetBool.Request(data=True)
+        ).success
         assert harness.spin_until(lambda: node.state == "paused" and not np.any(hardware.held_command()), 3)
         q_paused = hardware.positions()
         harness.spin_for(0.2)
         np.testing.assert_array_equal(hardware.positions(), q_paused)  # held still, exactly
-        _call(harness, SetBool, "/cartesian_controller/pause", SetBool.Request(data=False))
-        _send(harness, away)
+        _call(harness, SetBool, f"{node.test_namespace}/cartesian_controller/pause", SetBool.Request(data=False))
+        _send(harness, node, away)
         assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
         hardware.publishing = False  # the driver goes quiet: stale input, come to rest
         assert harness.spin_until(lambda: node.state == "stale input" and node.command_filter.at_rest, 3)
         hardware.publishing = True
         assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
-        assert _call(harness, Trigger, "/cartesian_controller/stop", Trigger.Request()).success
+        assert _call(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request()).success
         assert harness.spin_until(lambda: node.state == "stopped" and not np.any(hardware.held_command()), 3)
         assert node.supervisor.goal_kind is None  # the goal was dropped
         commands = np.array([values for _, values in hardware.commands])
@@ -121,16 +135,16 @@ def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
 def test_a_goal_after_a_stop_is_followed_and_converges(harness):
     model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
-        _call(harness, Trigger, "/cartesian_controller/stop", Trigger.Request())
+        _call(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request())
         assert harness.spin_until(lambda: node.state == "stopped", 3)
         goal = frame_pose(model, hardware.positions())
         goal[:3, 3] += [0.0, 0.0, 0.03]
-        stamp = _send(harness, goal)
+        stamp = _send(harness, node, goal)
         assert harness.spin_until(lambda: node.state == "converged", 10)
         np.testing.assert_allclose(frame_pose(model, hardware.positions())[:3, 3], goal[:3, 3], atol=2e-4)
         assert any(
             s.values and dict((kv.key, kv.value) for kv in s.values)["goal_stamp"] == stamp
-            for s in statuses(diagnostics, "cartesian_controller")
+            for s in statuses(diagnostics, node.status_name)
         )
     finally:
         hardware.close()
@@ -139,7 +153,7 @@ def test_a_goal_after_a_stop_is_followed_and_converges(harness):
 def _unreachable(harness, robot, q0, goal, **params):
     model, hardware, node, diagnostics = _arm(harness, robot, q0, **params)
     try:
-        _send(harness, goal)
+        _send(harness, node, goal)
         assert harness.spin_until(lambda: node.state == "unreachable", 8), (node.state, node.detail)
         assert harness.spin_until(lambda: node.command_filter.at_rest and not np.any(hardware.held_command()), 2)
         q = hardware.positions()
@@ -147,7 +161,7 @@ def _unreachable(harness, robot, q0, goal, **params):
         np.testing.assert_array_equal(hardware.positions(), q)  # at rest
         commands = np.array([values for _, values in hardware.commands])
         assert_stream_within(commands, JointLimits.of(model), 1.0 / RATE)
-        reported = [dict((kv.key, kv.value) for kv in s.values) for s in statuses(diagnostics, "cartesian_controller")]
+        reported = [dict((kv.key, kv.value) for kv in s.values) for s in statuses(diagnostics, node.status_name)]
         return model, q, node.detail, reported[-1]
     finally:
         hardware.close()
@@ -182,12 +196,12 @@ def test_a_goal_beyond_a_joint_limit_is_unreachable_naming_the_joint(harness):
 def test_a_goal_rejected_for_its_frame_is_reported_with_the_reason(harness):
     model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
-        stamp = _send(harness, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
+        stamp = _send(harness, node, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
         assert harness.spin_until(lambda: node.rejected_stamp == stamp, 3)
         assert "'world'" in node.last_rejection and "base_link" in node.last_rejection
 
         def reported():
-            for s in statuses(diagnostics, "cartesian_controller"):
+            for s in statuses(diagnostics, node.status_name):
                 values = dict((kv.key, kv.value) for kv in s.values)
                 if values.get("rejected_stamp") == stamp:
                     return values

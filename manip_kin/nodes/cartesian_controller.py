@@ -34,8 +34,9 @@ from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
 from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import JointReferenceReader
-from manip_kin.nodes.params import LiveParameters, declare_parameters
+from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
+from manip_kin.nodes.robot_description import joints_problem
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
@@ -50,7 +51,7 @@ class CartesianControllerNode(LoopingNode):
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
-        self.model = load_node_model(self, params)
+        self.model = load_node_model(self, params, self._switch_model)
         limit_specs = joint_limit_parameters(self.model)
         params.update(declare_parameters(self, limit_specs))
         self._params = params
@@ -156,7 +157,7 @@ class CartesianControllerNode(LoopingNode):
         )
         controller = CartesianController(self.model, config)
         supervisor_config = self._supervisor_config(params, controller)
-        diagnostics_period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        diagnostics_period_ns = period_ns(params["diagnostics_rate_hz"])
         limits = joint_limits_from_params(self.model, params)
         if hasattr(self, "supervisor"):
             self.supervisor.reconfigure(supervisor_config, diagnostics_period_ns)
@@ -202,6 +203,30 @@ class CartesianControllerNode(LoopingNode):
         except ManipKinError as error:
             return str(error)
         self._params = params
+        return None
+
+    def _switch_model(self, model) -> str | None:
+        """``~/reload_robot_description``: control ``model`` from the next cycle (the same joints,
+        e.g. new limits or geometry), or why not (nothing changes)."""
+        problem = joints_problem(self.model, model)
+        if problem:
+            return problem
+        previous = self.model
+        self.model = model
+        try:
+            self._configure(self._params)
+        except ManipKinError as error:
+            self.model = previous
+            return f"cannot control the new model {model.name!r} as configured: {error}"
+        bounds = InputBounds.of(model)
+        self._joint_states = conv.JointStateDecoder(model.joint_names, bounds.position_lower, bounds.position_upper)
+        self._prediction_bounds = (
+            model.lower.tolist(),
+            model.upper.tolist(),
+            (PLAUSIBLE_RATE_FACTOR * model.velocity_limits).tolist(),
+        )
+        self._references = JointReferenceReader(model)
+        self.bounds = bounds
         return None
 
     # --- inputs --------------------------------------------------------------------------------

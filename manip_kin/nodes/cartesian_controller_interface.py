@@ -5,8 +5,17 @@ Kept apart from the node so the table can be read (and documented) on its own.
 
 from __future__ import annotations
 
+import math
+
 from manip_kin.nodes.joint_limit_params import HELP_LINE
-from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
+from manip_kin.nodes.params import (
+    REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
+    ParamSpec,
+    diagnostics_rate,
+    loop_rate,
+    usage_text,
+)
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import ControllerState
 
@@ -17,9 +26,11 @@ STATES = tuple(state.value for state in ControllerState)
 
 PARAMETERS = (
     *model_parameters(""),
-    ParamSpec("rate_hz", "float", 500.0, "control and command rate", "Hz", positive=True),
-    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0, tunable=True),
-    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0, tunable=True),
+    loop_rate("control and command rate"),
+    # Gains: the sampled law e(k+1) = (1 - K dt) e(k) needs K dt < 2; 1000 1/s keeps that up to
+    # 2 kHz and leaves every output finite (the rates are then bounded by the velocity limits).
+    ParamSpec("gain_angular", "float", 0.8, "orientation gain K_o", "1/s", minimum=0.0, maximum=1e3, tunable=True),
+    ParamSpec("gain_linear", "float", 0.8, "position gain K_p", "1/s", minimum=0.0, maximum=1e3, tunable=True),
     ParamSpec(
         "frame", "str", "", "controlled frame: tool, ee, a joint number or a link name ('' = tool if any, else ee)"
     ),
@@ -29,13 +40,25 @@ PARAMETERS = (
         "",
         "controlled error components: full, position, position_yaw, orientation or e.g. 'rz,x,y,z' ('' = full for 6+ joints)",
     ),
-    ParamSpec("damping_max", "float", 0.04, "damping lambda at an exact singularity", minimum=0.0, tunable=True),
+    # lambda and epsilon are in the unit of the Jacobian's singular values (about the arm's
+    # size in m): beyond 10 an arm of metres would barely move (and lambda^2 stays far from an
+    # overflow); below 1e-6 the damping would act only within rounding noise of a singularity.
+    ParamSpec(
+        "damping_max",
+        "float",
+        0.04,
+        "damping lambda at an exact singularity",
+        minimum=0.0,
+        maximum=10.0,
+        tunable=True,
+    ),
     ParamSpec(
         "singular_threshold",
         "float",
         0.02,
         "smallest singular value below which damping rises",
-        positive=True,
+        minimum=1e-6,
+        maximum=10.0,
         tunable=True,
     ),
     ParamSpec("respect_velocity_limits", "bool", True, "scale the joint rates into the velocity limits", tunable=True),
@@ -47,15 +70,18 @@ PARAMETERS = (
         tunable=True,
     ),
     ParamSpec("base_frame", "str", "", "frame id goals must carry ('' = the robot's base frame, base_link)"),
+    # Timeouts: 1 ms (one period at 1 kHz) to a minute; 0 would make every input stale.
     ParamSpec(
         "joint_state_timeout",
         "float",
         0.1,
         "no joint state for longer than this: publish zeros",
         "s",
-        positive=True,
+        minimum=1e-3,
+        maximum=60.0,
         tunable=True,
     ),
+    # A day at most: longer is 'never', which is 0.
     ParamSpec(
         "goal_timeout",
         "float",
@@ -63,6 +89,7 @@ PARAMETERS = (
         "a goal older than this is dropped and zeros published (0 = goals never expire)",
         "s",
         minimum=0.0,
+        maximum=86400.0,
         tunable=True,
     ),
     ParamSpec(
@@ -71,7 +98,8 @@ PARAMETERS = (
         0.02,
         "the feed-forward twist is used while younger than this (short: a stalled stream must not carry the arm on)",
         "s",
-        positive=True,
+        minimum=1e-3,
+        maximum=60.0,
         tunable=True,
     ),
     ParamSpec(
@@ -82,6 +110,7 @@ PARAMETERS = (
         "command will drive, compensating the state-command-robot delay",
         tunable=True,
     ),
+    # A delay of a second is no real-time command path; the prediction extrapolates over it.
     ParamSpec(
         "command_latency",
         "float",
@@ -90,15 +119,18 @@ PARAMETERS = (
         "(add one robot period for a robot that stamps its state before applying that cycle's command)",
         "s",
         minimum=0.0,
+        maximum=1.0,
         tunable=True,
     ),
+    # Tolerances: from a nanometre/nanoradian (below float rounding of a pose) to a metre / half a turn.
     ParamSpec(
         "position_tolerance",
         "float",
         1e-4,
         "converged when the position error is below this",
         "m",
-        positive=True,
+        minimum=1e-9,
+        maximum=1.0,
         tunable=True,
     ),
     ParamSpec(
@@ -107,9 +139,11 @@ PARAMETERS = (
         1e-3,
         "... and the orientation error below this",
         "rad",
-        positive=True,
+        minimum=1e-9,
+        maximum=math.pi,
         tunable=True,
     ),
+    # As the cartesian gains: K dt < 2 for the sampled joint law up to 2 kHz.
     ParamSpec(
         "gain_joint",
         "float",
@@ -117,6 +151,7 @@ PARAMETERS = (
         "joint-space gain K on q_ref - q when following a joint reference (plus its velocity)",
         "1/s",
         minimum=0.0,
+        maximum=1e3,
         tunable=True,
     ),
     ParamSpec(
@@ -125,24 +160,18 @@ PARAMETERS = (
         1e-3,
         "converged on a joint reference when every joint is within this of it",
         "rad | m",
-        positive=True,
+        minimum=1e-9,
+        maximum=1.0,
         tunable=True,
     ),
+    # Below 1, so a zero quaternion (no rotation at all) can never pass; 1e-9 is above double rounding.
     ParamSpec(
         "quaternion_tolerance",
         "float",
         1e-2,
         "a goal quaternion whose length differs from 1 by more is rejected",
-        positive=True,
-        tunable=True,
-    ),
-    ParamSpec(
-        "diagnostics_rate_hz",
-        "float",
-        10.0,
-        "rate of /diagnostics (also sent at once on a state change)",
-        "Hz",
-        positive=True,
+        minimum=1e-9,
+        maximum=0.5,
         tunable=True,
     ),
     ParamSpec(
@@ -152,7 +181,8 @@ PARAMETERS = (
         "longest a halt may take: on exit, ~/stop, ~/pause and faults the commands come to rest within the "
         "deceleration and jerk limits, and are zero after this at the latest",
         "s",
-        positive=True,
+        minimum=0.01,
+        maximum=60.0,
         tunable=True,
     ),
     ParamSpec(
@@ -162,9 +192,11 @@ PARAMETERS = (
         "a resting goal whose error falls by less than 2 % in this long, with the arm singular or at joint "
         "limits, is unreachable (the commands come to rest)",
         "s",
-        positive=True,
+        minimum=0.05,
+        maximum=10.0,
         tunable=True,
     ),
+    diagnostics_rate(10.0, "rate of /diagnostics (also sent at once on a state change)"),
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -182,6 +214,9 @@ USAGE = usage_text(
     "layout): without a goal, without a fresh joint state, paused (~/pause), stopped (~/stop),\n"
     "at an unreachable goal and on exit, the commands come to rest within them (at most\n"
     "stop_time), and the last command before exit is an exact zero.\n"
+    "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
+    "one of several); a later, different one is logged, and the service\n"
+    "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
     extra_help=HELP_LINE,

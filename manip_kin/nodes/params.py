@@ -29,6 +29,37 @@ from manip_kin.errors import InvalidArgumentError
 
 KINDS = ("float", "int", "bool", "str", "float_list")
 
+#: Longest string parameter [characters]: a path (PATH_MAX) or a link name fits.
+MAX_TEXT_LENGTH = 4096
+
+#: Most values in a ``float_list`` parameter: one per joint of any chain.
+MAX_LIST_ITEMS = 10000
+
+#: Characters of a refused value quoted in a message: a 100k-element list is not echoed.
+QUOTE_LENGTH = 80
+
+
+def quoted(value) -> str:
+    """``repr(value)`` cut to :data:`QUOTE_LENGTH` characters, with the size of what was cut."""
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - an object whose repr fails is still refused by its type
+        text = f"<{type(value).__name__}>"
+    if len(text) <= QUOTE_LENGTH:
+        return text
+    size = f"{len(value)} items" if isinstance(value, (list, tuple)) else f"{len(text)} characters"
+    return f"{text[: QUOTE_LENGTH - 3]}... ({size})"
+
+
+def period_ns(rate_hz: float) -> int:
+    """The period [ns] of a rate [Hz] from a checked parameter; 0 for a rate of 0 (off)."""
+    return int(1e9 / rate_hz) if rate_hz > 0 else 0
+
+
+def _is_number(value) -> bool:
+    """An int or a float, not a bool and not a string (``"1.5"`` is text, not a number)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -40,12 +71,20 @@ class ParamSpec:
         default: default value (None: no default, e.g. "the robot's start configuration").
         description: what it does, one sentence.
         unit: unit text such as ``Hz``, ``s``, ``1/s``, ``m`` ("" when none).
-        minimum: smallest valid value for numbers (inclusive), or None.
-        positive: True when the value must be > 0.
+        minimum: smallest valid value for numbers (inclusive; per element of a
+            ``float_list``), or None.
+        maximum: largest valid value for numbers (inclusive; per element of a
+            ``float_list``), or None.
+        positive: True when the value must be > 0 (an exclusive minimum of 0).
+        zero_is_off: 0 is valid too and turns the feature off; other values must be within
+            ``minimum``..``maximum`` (a rate: 0 = off, a tiny one such as 1e-300 Hz is refused).
         choices: valid values for strings, or empty.
         default_text: how to show a None default in ``--help``.
         tunable: settable on the running node (see :class:`LiveParameters`); otherwise
             structural and read-only.
+
+    Every number parameter of the nodes has both bounds, chosen so that no value within
+    them can raise or produce a non-finite output in the loop (test/test_parameter_ranges.py).
     """
 
     name: str
@@ -54,7 +93,9 @@ class ParamSpec:
     description: str
     unit: str = ""
     minimum: float | None = None
+    maximum: float | None = None
     positive: bool = False
+    zero_is_off: bool = False
     choices: tuple[str, ...] = ()
     default_text: str = ""
     tunable: bool = False
@@ -74,17 +115,26 @@ class ParamSpec:
         )
 
     def constraint_text(self) -> str:
-        """Valid values in words."""
+        """Valid values in words, e.g. ``0 to 1000``, ``> 0 and <= 10``, ``0 (off) or 0.1 to 1000``."""
         if self.choices:
             return "one of " + ", ".join(self.choices)
-        if self.positive:
-            return "> 0"
-        if self.minimum is not None:
-            return f">= {self.minimum:g}"
-        return ""
+        low, high = self.minimum, self.maximum
+        if self.positive and (low is None or low <= 0):
+            text = "> 0" if high is None else f"> 0 and <= {high:g}"
+        elif low is not None and high is not None:
+            text = f"{low:g} to {high:g}"
+        elif low is not None:
+            text = f">= {low:g}"
+        elif high is not None:
+            text = f"<= {high:g}"
+        else:
+            text = ""
+        if self.kind == "float_list" and text:
+            text = "each " + text
+        return f"0 (off) or {text}" if self.zero_is_off else text
 
     def help_line(self) -> str:
-        """One line for ``--help``: name, default, unit, description."""
+        """One line for ``--help``: name, default, unit, valid values, description."""
         if self.default is None:
             default = self.default_text or "(none)"
         elif isinstance(self.default, str):
@@ -95,60 +145,73 @@ class ParamSpec:
             default = str(self.default)
         unit = f" [{self.unit}]" if self.unit else ""
         choices = f" One of: {', '.join(self.choices)}." if self.choices else ""
+        valid = f" Valid: {self.constraint_text()}." if self.kind in ("float", "int", "float_list") else ""
+        valid = "" if valid == " Valid: ." else valid
         live = " Settable at run time." if self.tunable else ""
-        return f"  {self.name} (default {default}){unit}: {self.description}.{choices}{live}"
+        return f"  {self.name} (default {default}){unit}: {self.description}.{choices}{valid}{live}"
 
     def coerce(self, value):
-        """``value`` converted to this parameter's kind and checked; InvalidArgumentError otherwise."""
+        """``value`` converted to this parameter's kind and checked; InvalidArgumentError otherwise.
+
+        Strict types: a float parameter takes an int or a float (``-p rate_hz:=1000``), an
+        int parameter an int (or an integral float); a bool or a string is never a number.
+        """
         if value is None:
             return None
-        try:
-            if self.kind == "float":
-                if isinstance(value, bool):
-                    raise TypeError
-                result = float(value)
-                self._check_number(result)
-                return result
-            if self.kind == "int":
-                if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
-                    raise TypeError
-                result = int(value)
-                self._check_number(result)
-                return result
-            if self.kind == "bool":
-                if not isinstance(value, bool):
-                    raise TypeError
-                return value
-            if self.kind == "str":
-                if not isinstance(value, str):
-                    raise TypeError
-                if self.choices and value not in self.choices:
-                    raise InvalidArgumentError(f"parameter {self.name} = {value!r}; valid: {', '.join(self.choices)}")
-                return value
-            if self.kind == "float_list":
-                if isinstance(value, (str, bytes)) or any(isinstance(v, bool) for v in value):
-                    raise TypeError
-                result = [float(v) for v in value]
-                if not all(math.isfinite(v) for v in result):
-                    raise InvalidArgumentError(f"parameter {self.name} contains NaN or infinity; valid: finite numbers")
-                return result
-        except (TypeError, ValueError) as error:
-            if isinstance(error, InvalidArgumentError):
-                raise
-            raise InvalidArgumentError(
-                f"parameter {self.name} = {value!r} has the wrong type; valid: {self._kind_text()}"
-            ) from None
-        raise InvalidArgumentError(f"parameter {self.name}: unknown kind {self.kind!r}")
+        if self.kind == "float" and _is_number(value):
+            return self._checked(float(value))
+        if self.kind == "int" and _is_number(value) and (isinstance(value, int) or value.is_integer()):
+            return self._checked(int(value))
+        if self.kind == "bool" and isinstance(value, bool):
+            return value
+        if self.kind == "str" and isinstance(value, str):
+            if len(value) > MAX_TEXT_LENGTH:
+                raise self._error(value, f"at most {MAX_TEXT_LENGTH} characters")
+            if self.choices and value not in self.choices:
+                raise self._error(value, ", ".join(self.choices))
+            return value
+        if self.kind == "float_list" and self._is_number_list(value):
+            if len(value) > MAX_LIST_ITEMS:
+                raise self._error(value, f"at most {MAX_LIST_ITEMS} numbers")
+            result = [float(v) for v in value]
+            for number in result:
+                self._checked(number, value)
+            return result
+        if self.kind not in KINDS:
+            raise InvalidArgumentError(f"parameter {self.name}: unknown kind {self.kind!r}")
+        kind = "text" if isinstance(value, str) else type(value).__name__
+        raise InvalidArgumentError(
+            f"parameter {self.name} = {quoted(value)} ({kind}) has the wrong type; valid: {self._kind_text()}"
+        )
 
-    def _check_number(self, value: float) -> None:
-        if not math.isfinite(value):
-            raise InvalidArgumentError(f"parameter {self.name} = {value}; valid: a finite number")
-        if self.positive and not value > 0:
-            raise InvalidArgumentError(f"parameter {self.name} = {value:g}; valid: > 0 {self.unit}".rstrip())
-        if self.minimum is not None and value < self.minimum:
-            raise InvalidArgumentError(
-                f"parameter {self.name} = {value:g}; valid: >= {self.minimum:g} {self.unit}".rstrip()
-            )
+    @staticmethod
+    def _is_number_list(value) -> bool:
+        if isinstance(value, (str, bytes)):
+            return False
+        try:
+            return all(_is_number(v) for v in value)
+        except TypeError:  # not iterable
+            return False
+
+    def _checked(self, number, value=None):
+        """``number`` when within the range; ``value`` is the whole list it is an element of."""
+        shown = number if value is None else value
+        if isinstance(number, float) and not math.isfinite(number):
+            raise self._error(shown, "finite numbers" if value is not None else "a finite number")
+        if self.zero_is_off and number == 0:
+            return number
+        low, high = self.minimum, self.maximum
+        if (
+            (self.positive and not number > 0)
+            or (low is not None and number < low)
+            or (high is not None and number > high)
+        ):
+            raise self._error(shown, f"{self.constraint_text()} {self.unit}".rstrip())
+        return number
+
+    def _error(self, value, valid: str) -> InvalidArgumentError:
+        shown = f"{value:g}" if isinstance(value, float) else quoted(value)
+        return InvalidArgumentError(f"parameter {self.name} = {shown}; valid: {valid}")
 
     def _kind_text(self) -> str:
         return {
@@ -160,6 +223,29 @@ class ParamSpec:
         }[self.kind]
 
 
+def loop_rate(description: str) -> ParamSpec:
+    """``rate_hz`` of a loop node, 1 to 10000 Hz: below 1 Hz it is no control loop, and no loop
+    here holds a period under 0.1 ms (the bounds also keep every period a finite number of ns)."""
+    return ParamSpec("rate_hz", "float", 500.0, description, "Hz", minimum=1.0, maximum=1e4)
+
+
+def diagnostics_rate(default: float, description: str, off: bool = False) -> ParamSpec:
+    """``diagnostics_rate_hz``, 0.1 to 1000 Hz (``off``: 0 turns it off): a status every 10 s at
+    the least, at most one per loop cycle of a 1 kHz loop; a tiny rate such as 1e-300 Hz (a
+    period beyond any integer of ns) is refused."""
+    return ParamSpec(
+        "diagnostics_rate_hz",
+        "float",
+        default,
+        description,
+        "Hz",
+        minimum=0.1,
+        maximum=1e3,
+        zero_is_off=off,
+        tunable=True,
+    )
+
+
 #: The loop thread's scheduling, the same parameter on every loop node.
 REALTIME_PRIORITY = ParamSpec(
     "realtime_priority",
@@ -168,6 +254,7 @@ REALTIME_PRIORITY = ParamSpec(
     "SCHED_FIFO priority 1..99 of the loop thread and, while it runs, of the threads it waits on: "
     "the executor's and the middleware's receive threads (0 = normal scheduling; needs root/CAP_SYS_NICE)",
     minimum=0,
+    maximum=99,  # the range of SCHED_FIFO on Linux
 )
 
 #: Under normal scheduling, the loop thread's EEVDF slice (see rate_loop.set_scheduler_slice).
@@ -180,6 +267,7 @@ SCHEDULER_SLICE = ParamSpec(
     "within 0.0001-0.1; 0 = the kernel's default)",
     "s",
     minimum=0.0,
+    maximum=0.1,  # the kernel's own ceiling
 )
 
 
@@ -232,21 +320,34 @@ class LiveParameters:
                 continue
             if not spec.tunable:
                 return _refused(f"parameter {spec.name} is read-only: structural, set at start (restart the node)")
-            value = None if parameter.type_ == Parameter.Type.NOT_SET else parameter.value
+            if parameter.type_ == Parameter.Type.NOT_SET:
+                return _refused(f"parameter {spec.name} cannot be unset; valid: {spec.constraint_text() or spec.kind}")
             try:
-                updates[spec.name] = spec.coerce(value)
+                updates[spec.name] = spec.coerce(parameter.value)
             except InvalidArgumentError as error:
                 return _refused(str(error))
         if not updates:
             return SetParametersResult(successful=True)
-        problem = self._apply(updates)
+        try:
+            problem = self._apply(updates)
+        except Exception as error:  # noqa: BLE001 - an exception here would end the executor: refuse instead
+            self._logger.error(f"setting {', '.join(updates)} failed: {type(error).__name__}: {error}"[:MAX_REASON])
+            problem = f"the node could not use it: {type(error).__name__}: {error}"
         if problem:
             return _refused(problem)
-        self._logger.info("parameters set: " + ", ".join(f"{name} = {value!r}" for name, value in updates.items()))
+        self._logger.info(
+            "parameters set: " + ", ".join(f"{name} = {quoted(value)}" for name, value in updates.items())
+        )
         return SetParametersResult(successful=True)
 
 
+#: Longest refusal reason [characters] (the reason of a SetParametersResult).
+MAX_REASON = 400
+
+
 def _refused(reason: str) -> SetParametersResult:
+    if len(reason) > MAX_REASON:
+        reason = reason[: MAX_REASON - 3] + "..."
     return SetParametersResult(successful=False, reason=reason)
 
 

@@ -31,6 +31,9 @@ from manip_kin.nodes.params import (
     LiveParameters,
     ParamSpec,
     declare_parameters,
+    diagnostics_rate,
+    loop_rate,
+    period_ns,
     usage_text,
 )
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
@@ -51,16 +54,20 @@ PARAMETERS = (
         None,
         "joint positions at start, model joint order",
         "rad | m",
+        minimum=-1e4,  # far beyond any joint's range (the limits are checked too); keeps FK finite
+        maximum=1e4,
         default_text="the robot's scenario start, else zeros clipped into the limits",
     ),
-    ParamSpec("rate_hz", "float", 500.0, "integration and publishing rate", "Hz", positive=True),
+    loop_rate("integration and publishing rate"),
+    # 1 ms (a period at 1 kHz) to a minute.
     ParamSpec(
         "command_timeout",
         "float",
         0.1,
         "a command older than this counts as zero velocity",
         "s",
-        positive=True,
+        minimum=1e-3,
+        maximum=60.0,
         tunable=True,
     ),
     ParamSpec(
@@ -70,19 +77,23 @@ PARAMETERS = (
         "frame id of the published poses and twists",
         default_text="the robot's base frame (base_link)",
     ),
-    ParamSpec(
-        "diagnostics_rate_hz",
-        "float",
-        2.0,
-        "rate of the loop statistics on /diagnostics (0: off)",
-        "Hz",
-        minimum=0.0,
-        tunable=True,
-    ),
+    diagnostics_rate(2.0, "rate of the loop statistics on /diagnostics (0: off)", off=True),
     ParamSpec("frame_prefix", "str", "", "prepended to every TF frame id (as robot_state_publisher's)"),
-    ParamSpec("tf_rate_hz", "float", 50.0, "rate of /tf (where tf2_msgs is installed)", "Hz", positive=True),
-    ParamSpec("markers_rate_hz", "float", 10.0, "rate of the markers topic (0: off)", "Hz", minimum=0.0),
-    ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", positive=True),
+    # Visuals: a viewer needs /tf at 0.1 Hz at least and gets nothing from more than one
+    # per cycle of a 1 kHz loop; markers (10 Hz by default) likewise; a trail of two minutes
+    # at its 20 ms spacing is 6000 points.
+    ParamSpec("tf_rate_hz", "float", 50.0, "rate of /tf (where tf2_msgs is installed)", "Hz", minimum=0.1, maximum=1e3),
+    ParamSpec(
+        "markers_rate_hz",
+        "float",
+        10.0,
+        "rate of the markers topic (0: off)",
+        "Hz",
+        minimum=0.1,
+        maximum=1e3,
+        zero_is_off=True,
+    ),
+    ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", minimum=0.02, maximum=120.0),
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -298,7 +309,7 @@ class RobotStateNode(LoopingNode):
             self.command_timeout_ns = int(params["command_timeout"] * 1e9)
         if "diagnostics_rate_hz" in params:
             rate = params["diagnostics_rate_hz"]
-            self._diagnostics_period_ns = int(1e9 / rate) if rate > 0 else 0
+            self._diagnostics_period_ns = period_ns(rate)
 
     def _publish_description(self) -> str:
         urdf_text = model_to_urdf(self.model)

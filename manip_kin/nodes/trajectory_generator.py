@@ -42,8 +42,9 @@ from manip_kin.line_timing import constant_scaling_problem, line_limits_problem
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import trajectory_points
-from manip_kin.nodes.params import LiveParameters, declare_parameters
+from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
+from manip_kin.nodes.robot_description import joints_problem
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
@@ -59,12 +60,12 @@ class TrajectoryGeneratorNode(LoopingNode):
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
-        self.model = load_node_model(self, params)
+        self.model = load_node_model(self, params, self._switch_model)
         limit_specs = joint_limit_parameters(self.model)
         params.update(declare_parameters(self, limit_specs))
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
-        self.supervisor = GeneratorSupervisor(int(1e9 / params["diagnostics_rate_hz"]))
+        self.supervisor = GeneratorSupervisor(period_ns(params["diagnostics_rate_hz"]))
         self._params = params
         self.bounds = InputBounds.of(self.model)
         self._configure(params)
@@ -155,7 +156,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._path_points = max(2, params["path_points"])
-        self.supervisor.throttle.period_ns = int(1e9 / params["diagnostics_rate_hz"])
+        self.supervisor.throttle.period_ns = period_ns(params["diagnostics_rate_hz"])
 
     def _set_parameters(self, updates: dict) -> str | None:
         """Live change of tunable parameters: None once in use (from the next line on), else why not."""
@@ -165,6 +166,23 @@ class TrajectoryGeneratorNode(LoopingNode):
         except ManipKinError as error:  # raised before anything changed
             return str(error)
         self._params = params
+        return None
+
+    def _switch_model(self, model) -> str | None:
+        """``~/reload_robot_description``: plan the next motion with ``model`` (the same joints),
+        or why not (nothing changes); a running motion keeps its plan."""
+        problem = joints_problem(self.model, model)
+        if problem:
+            return problem
+        bounds = InputBounds.of(model)
+        try:
+            _check_limits(self.limits, bounds)
+            task = parse_task(self._params["task"] or None, model)
+            start_frame = model.frame_index(model.default_frame)
+        except ManipKinError as error:
+            return f"cannot plan for the new model {model.name!r} as configured: {error}"
+        self._mapper = conv.JointStateMapper(model.joint_names, bounds.position_lower, bounds.position_upper)
+        self.model, self.bounds, self.task, self._start_frame = model, bounds, task, start_frame
         return None
 
     # --- inputs --------------------------------------------------------------------------------

@@ -7,7 +7,14 @@ from __future__ import annotations
 
 from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS
 from manip_kin.nodes.joint_limit_params import HELP_LINE
-from manip_kin.nodes.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, usage_text
+from manip_kin.nodes.params import (
+    REALTIME_PRIORITY,
+    SCHEDULER_SLICE,
+    ParamSpec,
+    diagnostics_rate,
+    loop_rate,
+    usage_text,
+)
 from manip_kin.nodes.robot_model import model_parameters
 from manip_kin.supervisors import GeneratorState
 from manip_kin.trajectory import TIME_SCALINGS
@@ -19,7 +26,7 @@ STATES = tuple(state.value for state in GeneratorState)
 
 PARAMETERS = (
     *model_parameters(""),
-    ParamSpec("rate_hz", "float", 500.0, "rate of goal_pose and goal_twist while a line runs", "Hz", positive=True),
+    loop_rate("rate of goal_pose and goal_twist while a line runs"),
     ParamSpec(
         "time_scaling", "str", "trapezoidal", "progress along the line over time", choices=TIME_SCALINGS, tunable=True
     ),
@@ -38,13 +45,17 @@ PARAMETERS = (
         "pose components a line must reach, as the controller's task: full, position, position_yaw, ... "
         "('' = full for 6+ joints)",
     ),
+    # Motion limits: from 0.1 mm/s (a 2 m line then takes 6 h) to 10 m/s and 100 m/s^2 (beyond any
+    # arm; the speeds are also capped at twice what this arm can do, see _check_limits); the
+    # angular ones from 1e-4 rad/s to 100 rad/s and 1000 rad/s^2. The lower bounds keep durations finite.
     ParamSpec(
         "max_linear_velocity",
         "float",
         0.25,
         "speed limit of the position (the constant speed of 'constant')",
         "m/s",
-        positive=True,
+        minimum=1e-4,
+        maximum=10.0,
         tunable=True,
     ),
     ParamSpec(
@@ -53,7 +64,8 @@ PARAMETERS = (
         0.5,
         "acceleration limit of the position (not used by 'constant')",
         "m/s^2",
-        positive=True,
+        minimum=1e-3,
+        maximum=100.0,
         tunable=True,
     ),
     ParamSpec(
@@ -62,7 +74,8 @@ PARAMETERS = (
         0.5,
         "angular speed limit of the orientation",
         "rad/s",
-        positive=True,
+        minimum=1e-4,
+        maximum=100.0,
         tunable=True,
     ),
     ParamSpec(
@@ -71,40 +84,39 @@ PARAMETERS = (
         1.0,
         "angular acceleration limit (not used by 'constant')",
         "rad/s^2",
-        positive=True,
+        minimum=1e-3,
+        maximum=1e3,
         tunable=True,
     ),
     ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits", tunable=True),
     ParamSpec(
         "base_frame", "str", "", "frame id of targets and published goals ('' = the robot's base frame, base_link)"
     ),
+    # 1 ms (a period at 1 kHz) to a minute.
     ParamSpec(
         "joint_state_timeout",
         "float",
         0.5,
         "a target is rejected when the newest joint_states is older than this (by its stamp)",
         "s",
-        positive=True,
+        minimum=1e-3,
+        maximum=60.0,
         tunable=True,
     ),
+    # Below 1, so a zero quaternion can never pass; 1e-9 is above double rounding.
     ParamSpec(
         "quaternion_tolerance",
         "float",
         1e-2,
         "a target quaternion whose length differs from 1 by more is rejected",
-        positive=True,
+        minimum=1e-9,
+        maximum=0.5,
         tunable=True,
     ),
-    ParamSpec("path_points", "int", 50, "poses in planned_path", positive=True, tunable=True),
-    ParamSpec(
-        "diagnostics_rate_hz",
-        "float",
-        5.0,
-        "rate of /diagnostics (also sent at once on a state change)",
-        "Hz",
-        positive=True,
-        tunable=True,
-    ),
+    # A path needs its two ends; 10000 poses (about 1 MB) is far more than a viewer shows, and
+    # the path is sampled in the loop when a motion starts.
+    ParamSpec("path_points", "int", 50, "poses in planned_path", minimum=2, maximum=10000, tunable=True),
+    diagnostics_rate(5.0, "rate of /diagnostics (also sent at once on a state change)"),
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -121,7 +133,10 @@ USAGE = usage_text(
     "current joint_states and streamed as joint_reference, within joint_limits.<joint>.*\n"
     "(velocity, acceleration, jerk); a single point at time_from_start 0 is timed as fast as\n"
     "those limits allow. The latest goal of either kind pre-empts the running motion.\n"
-    "Unreachable or malformed goals are rejected with a log line.",
+    "Unreachable or malformed goals are rejected with a log line.\n"
+    "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
+    "one of several); a later, different one is logged, and the service\n"
+    "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.",
     PARAMETERS,
     extra_help=HELP_LINE,
     services=[("~/stop", "std_srvs/Trigger", "stop streaming; the last goal sent is held")],
