@@ -100,12 +100,16 @@ class LiveFeed:
     Attributes:
         forwarded: messages returned so far, by channel topic.
         thinned: stream messages left out by the rate, by topic.
+        tf_failures: messages whose TF could not be made (they are still forwarded themselves).
+        last_tf_failure: why the last one failed ("" when none did).
     """
 
     rate_hz: float = DEFAULT_VIEW_RATE_HZ
     frame_prefix: str = ""
     forwarded: dict[str, int] = field(default_factory=dict)
     thinned: dict[str, int] = field(default_factory=dict)
+    tf_failures: int = 0
+    last_tf_failure: str = ""
     _tf: TfSynthesizer | None = None
     _live_tf: bool = False
     _decimators: dict[str, StampDecimator] = field(default_factory=dict)
@@ -114,6 +118,11 @@ class LiveFeed:
     def __post_init__(self) -> None:
         StampDecimator(self.rate_hz)  # a bad rate fails here, with its value
         self._tf = TfSynthesizer(self.rate_hz, self.frame_prefix)
+
+    @property
+    def live_tf(self) -> bool:
+        """True once :meth:`use_live_tf` was called."""
+        return self._live_tf
 
     @property
     def tf_source(self) -> str:
@@ -148,9 +157,13 @@ class LiveFeed:
             out.append(Outgoing(topic, data, received_ns))
         if self._tf is not None:
             # The synthesiser takes every joint state and picks /tf by stamp at rate_hz itself.
-            out += [
-                Outgoing(t.topic, t.data, t.log_time_ns) for t in self._tf.feed(topic, type_name, data, received_ns)
-            ]
+            try:
+                made = self._tf.feed(topic, type_name, data, received_ns)
+            except Exception as error:  # noqa: BLE001 - a message it cannot read: no TF from it, the rest goes on
+                self.tf_failures += 1
+                self.last_tf_failure = f"no /tf from a {topic} message: {type(error).__name__}: {error}"
+                made = []
+            out += [Outgoing(t.topic, t.data, t.log_time_ns) for t in made]
         for message in out:
             self.forwarded[message.topic] = self.forwarded.get(message.topic, 0) + 1
             if (delivery is Delivery.LATCHED and message.topic == topic) or message.topic == TF_STATIC_TOPIC:

@@ -309,3 +309,25 @@ def test_demo_live_runs_the_live_view_beside_the_pipeline():
     assert processes["live_view"].ready_status == "live_view"
     plain = build_parser().parse_args(["demo"])
     assert "live_view" not in {p.name for p in demo_processes(plain, Path("demo.mcap"), {}, {})}
+
+
+@given(st.binary(max_size=200))
+def test_a_joint_state_that_does_not_decode_is_forwarded_without_tf_and_the_feed_goes_on(garbage):
+    feed = LiveFeed(rate_hz=50.0)
+    feed.feed("/robot_description", "std_msgs/msg/String", Delivery.LATCHED, _cdr(_description()), 1)
+    out = feed.feed("/joint_states", "sensor_msgs/msg/JointState", Delivery.STREAM, garbage, 2)
+    assert out[0].topic == "/joint_states" and out[0].data == garbage
+    assert all(m.topic == "/tf" for m in out[1:])
+    good = feed.feed(
+        "/joint_states", "sensor_msgs/msg/JointState", Delivery.STREAM, _cdr(_joint_state(Q, 10**9)), 10**9
+    )
+    assert [m.topic for m in good] == ["/joint_states", "/tf"]
+
+
+def test_a_namespaced_arm_gets_its_tf_with_the_frame_prefix():
+    feed = LiveFeed(rate_hz=50.0, frame_prefix="left/")
+    feed.feed("/left/robot_description", "std_msgs/msg/String", Delivery.LATCHED, _cdr(_description()), 1)
+    out = feed.feed("/left/joint_states", "sensor_msgs/msg/JointState", Delivery.STREAM, _cdr(_joint_state(Q, 5)), 2)
+    transforms = [t for _, t in decode_tf_message(out[1].data)]
+    assert transforms[0].parent == "left/base_link" and transforms[-1].child == "left/link7"
+    assert feed.feed("/right/joint_states", "sensor_msgs/msg/JointState", Delivery.STREAM, b"", 3)[1:] == []

@@ -169,6 +169,7 @@ class LiveViewNode(Node):
             raise OperationError(f"cannot serve on {self.address}:{values['port']}: {error}") from None
         self.port = int(self._server.port)
         self._sent = 0
+        self._tf_failures_logged = 0
         self._tf_class = tf_message_class()
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(STATUS_PERIOD_S, self._on_status)
@@ -236,6 +237,9 @@ class LiveViewNode(Node):
                     continue
                 for message in out:
                     self._send(message)
+                if self._feed.tf_failures != self._tf_failures_logged:
+                    self._tf_failures_logged = self._feed.tf_failures
+                    self._problems("tf", f"live_view: {self._feed.last_tf_failure}")
 
     def _send(self, message) -> None:
         channel = self._channels.get(message.topic)
@@ -258,6 +262,7 @@ class LiveViewNode(Node):
             ("messages_sent", self._sent),
             ("stream_messages_thinned", thinned),
             ("tf_source", tf_source),
+            ("tf_failures", self._feed.tf_failures),
         ] + [(f"sent:{topic}", count) for topic, count in sorted(forwarded.items())]
         status = make_diagnostic_status(
             self.get_fully_qualified_name().lstrip("/"), "ok", "serving", "live_view", values
@@ -266,7 +271,7 @@ class LiveViewNode(Node):
 
     def _check_live_tf(self) -> None:
         """Forward a node's own /tf (and stop synthesising) once one is published and tf2_msgs imports."""
-        if self._tf_class is None or self._feed.tf_source == "live /tf forwarded":
+        if self._tf_class is None or self._feed.live_tf:
             return
         if not self.get_publishers_info_by_topic(TF_TOPIC):
             return
