@@ -4,8 +4,10 @@ The genova7 pipeline runs at 1 kHz with ``live_view`` at its default rates (stre
 ``/tf`` at 50 Hz). Per round, over the same window: live_view's CPU [% of one core] with no
 client, with one client (test/foxglove_client/client.mjs subscribed to every channel), and
 with that client beside one that subscribed to everything and never reads (a socket with a
-4 KiB receive buffer); the reading client's ``/joint_states`` rate is reported too. Rounds
-alternate the three cases, so that the machine's drift falls on all of them.
+4 KiB receive buffer); the reading client's ``/joint_states`` rate and the node's resident
+memory at the end of each window are reported too (the stalled client's queue is bounded by
+``message_backlog``, so the memory must not grow with it). Rounds alternate the three cases,
+so that the machine's drift falls on all of them.
 """
 
 from __future__ import annotations
@@ -28,6 +30,13 @@ def _stalled_client(port: int) -> socket.socket:
     return connect(port)
 
 
+def _rss_mib(pid: int) -> float:
+    for line in open(f"/proc/{pid}/status"):
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
 def _window(pipeline, client, seconds: float, reader: bool, stalled: bool) -> dict:
     from live_view_client import start_client
 
@@ -39,13 +48,14 @@ def _window(pipeline, client, seconds: float, reader: bool, stalled: bool) -> di
         start_cpu, start = _cpu_seconds(pid), time.monotonic()
         client.spin_for(seconds)
         cpu = 100.0 * (_cpu_seconds(pid) - start_cpu) / (time.monotonic() - start)
+        rss = _rss_mib(pid)
         rate = float("nan")
         if process is not None:
             out, _ = process.communicate(timeout=seconds + 30)
             result = json.loads(out)
             times = result["times"].get("/joint_states", [])
             rate = (len(times) - 1) / ((times[-1] - times[0]) / 1000.0) if len(times) > 1 else float("nan")
-        return {"cpu": cpu, "rate": rate}
+        return {"cpu": cpu, "rate": rate, "rss": rss}
     finally:
         if silent is not None:
             silent.close()
@@ -81,6 +91,7 @@ def run_live_view_benchmarks(rounds: int = 3, window: float = 4.0) -> list[dict]
             "cpu_percent_median": float(np.median(cpu)),
             "cpu_percent_min": float(cpu.min()),
             "cpu_percent_max": float(cpu.max()),
+            "rss_mib_max": float(max(s["rss"] for s in samples)),
             "rounds": len(samples),
         }
         if not np.all(np.isnan(rate)):
