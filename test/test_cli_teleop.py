@@ -168,6 +168,16 @@ def test_jog_streams_names_and_velocities_then_zero(controller):
     assert '"messages": ' in result.stdout and _on(controller, "stop") == [None]
 
 
+def test_a_twist_in_a_frame_outside_the_chain_is_a_one_line_error(controller):
+    result = _run(controller, "twist", "--linear", "0.01", "0", "0", "--frame", "camera", "--duration", "1")
+    assert result.returncode == 2
+    links = ["base_link", *(f"link{i}" for i in range(1, 8)), "ee", "tool"]
+    assert result.stderr.strip().splitlines() == [
+        f"manip_kin twist: error: --frame camera: not a frame of the arm's chain; valid: base, tool, {', '.join(links)}"
+    ]
+    assert _on(controller, "twist_command") == []
+
+
 def test_jog_of_an_unknown_joint_is_a_one_line_error(controller):
     result = _run(controller, "jog", "--joint", "elbow", "--velocity", "0.1", "--duration", "1")
     assert result.returncode == 2

@@ -197,13 +197,19 @@ def test_a_foxglove_client_lists_subscribes_and_decodes_the_arm(live_view, foxgl
 
 
 def test_a_client_that_connects_later_still_gets_the_description_and_static_tf(live_view, foxglove_client):
+    from sensor_msgs.msg import JointState
+
     node = live_view.start_view()
+    # Bytes that are no JointState: forwarded as they are, no TF from them, the node goes on.
+    live_view.publisher(JointState, "joint_states").publish(b"\x00\x01\x00\x00\xff\xff")
+    assert live_view.spin_until(lambda: node._feed.tf_failures == 1, 5.0)
     first = _run_client(live_view, node.port, 0.5, "/robot_description,/tf_static")
     second = _run_client(live_view, node.port, 0.5, "/robot_description,/tf_static")
     for result in (first, second):
         assert result["counts"].get("/robot_description") == 1, result["counts"]
         assert result["counts"].get("/tf_static") == 1, result["counts"]
         assert {e["child_frame_id"] for e in result["last"]["/tf_static"]["transforms"]} == {"ee", "tool"}
+    assert node._intake_thread.is_alive()
 
 
 # A client that subscribes to everything and then never reads: a plain socket with a tiny

@@ -41,12 +41,15 @@ class ArmFrames:
         base_frame: frame id of the base.
         tool_frame: frame id of the controlled frame (the tool link, else the chain's tip).
         joint_names: the chain's joints, model order (empty when unknown).
+        links: the frame ids a twist may be expressed in: base, chain links, tip, tool (empty
+            when unknown: then any is sent).
         model: the model (None without a description).
     """
 
     base_frame: str = "base_link"
     tool_frame: str = "tool"
     joint_names: tuple[str, ...] = ()
+    links: tuple[str, ...] = ()
     model: object = None
 
 
@@ -63,9 +66,10 @@ def arm_frames(client, timeout: float = DESCRIPTION_WAIT_S) -> ArmFrames:
     source = client.topic("robot_description")
     model = load_urdf_string(text, source=source)
     hint = UrdfTree(text, source).chain_hint
-    tip = model.joints[-1].link_name if model.joints else model.base_frame
-    tool = hint.get("tool_link") or hint.get("tip_link") or tip
-    return ArmFrames(model.base_frame, tool, tuple(model.joint_names), model)
+    tip = hint.get("tip_link") or (model.joints[-1].link_name if model.joints else model.base_frame)
+    tool = hint.get("tool_link") or tip
+    links = dict.fromkeys([model.base_frame, *(j.link_name for j in model.joints if j.link_name), tip, tool])
+    return ArmFrames(model.base_frame, tool, tuple(model.joint_names), tuple(links), model)
 
 
 class CommandStream:
@@ -263,6 +267,10 @@ def run_twist(args: argparse.Namespace) -> int:
         frame = {"base": frames.base_frame, "tool": frames.tool_frame, None: frames.base_frame}.get(
             args.frame, args.frame
         )
+        if frames.links and frame not in frames.links:
+            raise InvalidArgumentError(
+                f"--frame {frame}: not a frame of the arm's chain; valid: base, tool, {', '.join(frames.links)}"
+            )
         return (lambda: stream.twist(args.linear, args.angular, frame)), {
             "linear": args.linear,
             "angular": args.angular,
