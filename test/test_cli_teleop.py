@@ -199,6 +199,7 @@ class _Terminal:
         self.settings = termios.tcgetattr(self.master)
         self.output = ""
         self.status: int | None = None
+        self.every = None  # called every 50 ms while waiting (to publish the arm's state)
 
     def pump(self) -> None:
         while select.select([self.master], [], [], 0)[0]:
@@ -219,7 +220,7 @@ class _Terminal:
                     self.status = os.waitstatus_to_exitcode(status)
             return predicate()
 
-        value = self.harness.spin_until(check, timeout)
+        value = self.harness.spin_until(check, timeout, every=self.every, period=0.05)
         assert value, f"timed out; terminal output:\n{self.output[-3000:]}"
         return value
 
@@ -252,8 +253,31 @@ def terminal(controller):
         opened.close()
 
 
+def _arm_state_publisher(harness):
+    """Publish the genova7 start state: joint_states, tool_pose and a controller status."""
+    from sensor_msgs.msg import JointState
+
+    from manip_kin.kinematics import frame_pose
+    from manip_kin.nodes.conversions import make_diagnostic_array, make_diagnostic_status, make_pose_stamped
+
+    q = MODEL.start_configuration()
+    pose = make_pose_stamped(frame_pose(MODEL, q, "tool"), "base_link", harness.node.get_clock().now().to_msg())
+    joints = JointState(name=list(MODEL.joint_names), position=[float(v) for v in q])
+    status = make_diagnostic_array(
+        pose.header.stamp, [make_diagnostic_status("cartesian_controller", "ok", "tracking", "genova7", [])]
+    )
+
+    def publish():
+        harness.publish("joint_states", joints)
+        harness.publish("tool_pose", pose)
+        harness.publish("/diagnostics", status)
+
+    return publish
+
+
 def test_teleop_keys_drive_the_topics_and_the_terminal_is_restored(controller, terminal):
     tty = terminal()
+    tty.every = _arm_state_publisher(controller)
     tty.wait(lambda: "tool frame tool" in tty.output and "\x1b[K" in tty.output)  # the first status line
     tty.press("w", lambda: (m := _newest(controller, "twist_command")) and m.twist.linear.x == 0.05)
     assert _newest(controller, "twist_command").header.frame_id == "base_link"
@@ -270,7 +294,13 @@ def test_teleop_keys_drive_the_topics_and_the_terminal_is_restored(controller, t
     # Leaving twist mode zeroed the turn in the tool frame first.
     after_mode = _on(controller, "twist_command")[-1]
     assert after_mode.header.frame_id == "tool" and after_mode.twist.angular.z == 0.0
-    assert "joint joint2" in tty.output and "nearest limit" in tty.output
+    # The status line (redrawn at 10 Hz): the command, the tool pose, the controller, the nearest limit.
+    tty.wait(
+        lambda: (
+            "joint joint2 -0.250 | speed 0.25 | xyz [-0.000 -1.137 +0.233] rpy [-1.047 +1.100 -1.571] | "
+            "controller tracking | nearest limit joint1 upper 1.571 (25%)" in tty.output
+        )
+    )
     tty.press("q", lambda: tty.status is not None)
     assert tty.status == 0
     assert list(_on(controller, "joint_jog")[-1].velocity) == [0.0]
