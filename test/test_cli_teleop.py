@@ -168,6 +168,26 @@ def test_jog_streams_names_and_velocities_then_zero(controller):
     assert '"messages": ' in result.stdout and _on(controller, "stop") == [None]
 
 
+def test_ctrl_c_during_a_twist_stops_the_arm_and_exits_130(controller, monkeypatch):
+    from manip_kin.cli.teleop_streaming import CommandStream
+
+    twist, calls = CommandStream.twist, []
+
+    def interrupted_on_the_fifth(self, *arguments):
+        calls.append(arguments)
+        if len(calls) == 5:
+            raise KeyboardInterrupt  # where Ctrl-C lands in the streaming loop
+        twist(self, *arguments)
+
+    monkeypatch.setattr(CommandStream, "twist", interrupted_on_the_fifth)
+    result = _run(controller, "twist", "--linear", "0.01", "0", "0", "--duration", "5", "--json")
+    assert result.returncode == 130
+    twists = _on(controller, "twist_command")
+    assert [m.twist.linear.x for m in twists] == [0.01] * 4 + [0.0]
+    assert [name for _, name, _ in controller.received][-1] == "stop"
+    assert '"messages": 5' in result.stdout
+
+
 def test_a_twist_in_a_frame_outside_the_chain_is_a_one_line_error(controller):
     result = _run(controller, "twist", "--linear", "0.01", "0", "0", "--frame", "camera", "--duration", "1")
     assert result.returncode == 2
