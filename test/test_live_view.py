@@ -122,6 +122,8 @@ def live_view():
 
     def start(**parameters):
         node = harness.start(LiveViewNode, port=0, **parameters)
+        # Discovery under load can take a while: the clients below connect once the node has the URDF.
+        assert harness.spin_until(lambda: node._feed.latched("/robot_description") is not None, 20.0)
         return node
 
     harness.start_view = start
@@ -201,6 +203,7 @@ def test_a_client_that_connects_later_still_gets_the_description_and_static_tf(l
 
     node = live_view.start_view()
     # Bytes that are no JointState: forwarded as they are, no TF from them, the node goes on.
+    live_view.wait_matched("joint_states", JointState, timeout=20.0)
     live_view.publisher(JointState, "joint_states").publish(b"\x00\x01\x00\x00\xff\xff")
     assert live_view.spin_until(lambda: node._feed.tf_failures == 1, 5.0)
     first = _run_client(live_view, node.port, 0.5, "/robot_description,/tf_static")

@@ -26,7 +26,7 @@ import tty
 import numpy as np
 
 from manip_kin.cli.common import add_namespace_argument, namespace_from_args
-from manip_kin.cli.teleop_streaming import JOG_TOPIC, TWIST_TOPIC, CommandStream, arm_frames
+from manip_kin.cli.teleop_streaming import JOG_TOPIC, TWIST_TOPIC, CommandStream, arm_frames, frames_from_urdf
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.teleop import KEY_HELP, TeleopState, apply_key, nearest_limit, status_line
 
@@ -99,6 +99,22 @@ class _Teleop:
     def __init__(self, client, stream: CommandStream, frames, state: TeleopState):
         self.client, self.stream, self.frames, self.state = client, stream, frames, state
         self.sent_moving = False
+
+    def follow_description(self) -> None:
+        """Take the arm's frames, names and limits from ``robot_description`` once it is published."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import String
+
+        from manip_kin.errors import ManipKinError
+
+        def take(msg) -> None:
+            try:
+                self.frames = frames_from_urdf(msg.data, self.client.topic("robot_description"))
+            except ManipKinError:
+                pass  # not a usable URDF: the defaults stay (the status shows no limit)
+
+        qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+        self.client.node.create_subscription(String, "robot_description", take, qos)
 
     def joint_names(self) -> list[str]:
         if self.frames.joint_names:
@@ -183,6 +199,8 @@ def run_teleop(args: argparse.Namespace) -> int:
             linear_speed=args.linear_speed, angular_speed=args.angular_speed, joint_speed=args.joint_speed
         )
         teleop = _Teleop(client, stream, frames, state)
+        if frames.model is None:  # robot_state may come later: take its URDF when it does
+            teleop.follow_description()
         print(f"{KEY_HELP}\nbase frame {frames.base_frame}, tool frame {frames.tool_frame}", flush=True)
         code = 0
         try:

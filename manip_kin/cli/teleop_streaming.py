@@ -56,14 +56,23 @@ class ArmFrames:
 def arm_frames(client, timeout: float = DESCRIPTION_WAIT_S) -> ArmFrames:
     """The arm's frames from ``robot_description`` (transient local); defaults when there is none."""
     from manip_kin.pipeline import PipelineError
-    from manip_kin.urdf import load_urdf_string
-    from manip_kin.urdf.document import UrdfTree
 
     try:
         text = client.robot_description(timeout)
     except PipelineError:
         return ArmFrames()
-    source = client.topic("robot_description")
+    return frames_from_urdf(text, client.topic("robot_description"))
+
+
+def frames_from_urdf(text: str, source: str) -> ArmFrames:
+    """The frames of the arm a URDF describes (its ``manip_kin_chain`` hint, else its unbranched chain).
+
+    Raises:
+        ModelFileError: the text is not a usable URDF (the message names ``source``).
+    """
+    from manip_kin.urdf import load_urdf_string
+    from manip_kin.urdf.document import UrdfTree
+
     model = load_urdf_string(text, source=source)
     hint = UrdfTree(text, source).chain_hint
     tip = hint.get("tip_link") or (model.joints[-1].link_name if model.joints else model.base_frame)
