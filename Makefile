@@ -18,6 +18,12 @@ export PYTHONUNBUFFERED := 1
 
 venv: $(STAMP)
 
+# The Foxglove WebSocket client the live_view tests and bench run (Node 20+, npm).
+FOXGLOVE_CLIENT := test/foxglove_client/node_modules/.package-lock.json
+
+$(FOXGLOVE_CLIENT): test/foxglove_client/package.json test/foxglove_client/package-lock.json
+	cd test/foxglove_client && npm ci --no-audit --no-fund
+
 $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --upgrade pip "setuptools>=64,<80" wheel
@@ -28,7 +34,7 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 demo: $(STAMP)
 	$(VENV)/bin/manip_kin demo
 
-test: lint
+test: lint $(FOXGLOVE_CLIENT)
 	$(VPY) -m pytest -q test
 
 # ruff (configured in ruff.toml): lint and format check; `make format` rewrites.
@@ -40,7 +46,7 @@ format: $(STAMP)
 	$(VENV)/bin/ruff format .
 	$(VENV)/bin/ruff check --fix .
 
-bench: $(STAMP)
+bench: $(STAMP) $(FOXGLOVE_CLIENT)
 	$(VPY) bench/run.py --out bench/results/bench.json
 
 # manip_kin against pinocchio and robotics-toolbox-python, in a venv of its own (never a
@@ -65,4 +71,4 @@ soak: $(STAMP)
 	$(VPY) bench/soak.py --minutes $(SOAK_MINUTES) --out bench/results/soak.json
 
 clean:
-	rm -rf $(VENV) $(ANCHORS_VENV) build install log *.egg-info .pytest_cache
+	rm -rf $(VENV) $(ANCHORS_VENV) build install log *.egg-info .pytest_cache test/foxglove_client/node_modules

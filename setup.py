@@ -30,6 +30,7 @@ setup(
             "cartesian_controller = manip_kin.nodes.cartesian_controller:main",
             "trajectory_generator = manip_kin.nodes.trajectory_generator:main",
             "recorder = manip_kin.nodes.recorder:main",
+            "live_view = manip_kin.nodes.live_view:main",
         ],
     },
 )

@@ -20,6 +20,8 @@ COMMAND_MODULES = (
     "manip_kin.cli.model_commands",
     "manip_kin.cli.motion_commands",
     "manip_kin.cli.ros_commands",
+    "manip_kin.cli.teleop_streaming",
+    "manip_kin.cli.teleop_command",
     "manip_kin.cli.move_command",
     "manip_kin.cli.control_commands",
     "manip_kin.cli.recording_commands",

@@ -6,6 +6,10 @@
    separate processes on loopback DDS; the pose goal, then a straight line back to a second
    target (the start tool pose);
 4. the recording: ``manip_kin info`` of it, its plots and an animation of the arm from its /tf.
+
+With ``--live`` the ``live_view`` node runs beside them: connect Foxglove to
+ws://127.0.0.1:8765 (``--live-port``) and import config/foxglove_layout.json to watch the arm
+move; at a terminal the demo then waits for Enter before it stops the nodes.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
+from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose, jacobian
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
@@ -55,6 +60,15 @@ def register(subparsers) -> None:
         "--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)"
     )
     parser.add_argument("--timeout", type=float, default=60.0, metavar="S", help="limit for each live leg [s]")
+    parser.add_argument(
+        "--live",
+        action="store_true",
+        help="also run live_view: watch the arm in Foxglove on ws://127.0.0.1:PORT (with "
+        "config/foxglove_layout.json); at a terminal, wait for Enter before stopping",
+    )
+    parser.add_argument(
+        "--live-port", type=int, default=8765, metavar="PORT", help="port of the live view (default 8765)"
+    )
     add_namespace_argument(parser)
     parser.set_defaults(run=run_demo)
 
@@ -70,6 +84,8 @@ def _pose_line(pose: np.ndarray) -> str:
 
 
 def run_demo(args: argparse.Namespace) -> int:
+    if not 0 < args.live_port < 65536:
+        raise InvalidArgumentError(f"--live-port {args.live_port}; valid: a TCP port 1-65535")
     model = load_robot("genova7")
     q0 = model.start_configuration()
     goal_pose = make_transform(rpy_to_matrix(*GOAL_RPY), GOAL_POSITION)
@@ -123,8 +139,19 @@ def run_demo(args: argparse.Namespace) -> int:
     return _run_live(args, model, q0, goal_pose, start_pose)
 
 
+def demo_processes(args: argparse.Namespace, out: Path, controller: dict, generator: dict) -> list:
+    """The demo's node processes: the recorder, the pipeline and, with ``--live``, ``live_view``."""
+    from manip_kin.pipeline import NodeProcess, pipeline_processes
+
+    processes = [NodeProcess("recorder", "recorder", {"output": str(out)})]
+    processes += pipeline_processes("genova7", rate_hz=args.rate, controller=controller, generator=generator)
+    if args.live:
+        processes.append(NodeProcess("live_view", "live_view", {"port": args.live_port}, ready_status="live_view"))
+    return processes
+
+
 def _run_live(args, model, q0, goal_pose, start_pose) -> int:
-    from manip_kin.pipeline import NodeProcess, Pipeline, ensure_ros_isolation, pipeline_processes
+    from manip_kin.pipeline import Pipeline, ensure_ros_isolation
 
     env = ensure_ros_isolation()
     namespace = namespace_from_args(args)
@@ -142,13 +169,16 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
         "gain_angular": GAIN,
     }
     generator = {"time_scaling": "trapezoidal", "max_linear_velocity": args.line_speed}
-    recorder = NodeProcess("recorder", "recorder", {"output": str(out)})
-    processes = [recorder] + pipeline_processes(
-        "genova7", rate_hz=args.rate, controller=controller, generator=generator
-    )
+    processes = demo_processes(args, out, controller, generator)
     exit_code = 0
     with Pipeline(processes, namespace=namespace) as pipeline:
         print(f"started {', '.join(pipeline.processes)} (logs in {pipeline.log_dir})", flush=True)
+        if args.live:
+            print(
+                f"live view: in Foxglove, Open connection -> Foxglove WebSocket -> ws://127.0.0.1:{args.live_port}, "
+                "then Layouts -> Import from file -> config/foxglove_layout.json",
+                flush=True,
+            )
         client = pipeline.client()
         legs = (
             ("leg 1: pose goal", client.send_goal, goal_pose),
@@ -178,6 +208,8 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
             exit_code = exit_code or (0 if converged else 1)
         tool_now = client.current_tool_pose()
         print(f"  tool now: {_pose_line(tool_now)}")
+        if args.live and sys.stdin.isatty():
+            input("live view still up: press Enter to stop the nodes and read the recording ")
         summary_code = pipeline.stop_process("recorder", timeout=10.0)
         recorder_lines = [line for line in pipeline.log_text("recorder").splitlines() if line.strip()]
         if recorder_lines:
