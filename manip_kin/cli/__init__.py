@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "manip_kin.cli.motion_commands",
     "manip_kin.cli.ros_commands",
     "manip_kin.cli.move_command",
+    "manip_kin.cli.collision_commands",
     "manip_kin.cli.recording_commands",
     "manip_kin.cli.plot_commands",
     "manip_kin.cli.demo_command",

@@ -67,7 +67,7 @@ def resolve_mesh_uri(uri: str, mesh_search_path: str = "", relative_to: Path | N
         for candidate in candidates:
             if candidate.is_file():
                 return candidate
-        looked = ", ".join(str(c) for c in candidates) or "nowhere"
+        looked = ", ".join(str(c) for c in candidates) or "no mesh_search_path directory"
         hint = "" if share is not None else f"; package {package!r} is not in the ament index (AMENT_PREFIX_PATH)"
         raise FileNotFoundError(f"{uri}: not found (looked in {looked}{hint}); set mesh_search_path")
     if text.startswith(FILE_SCHEME):
@@ -108,4 +108,4 @@ def load_convex_mesh(path: Path, scale=(1.0, 1.0, 1.0), source: str = "", field:
 
 def convex_vertices(shape) -> np.ndarray:
     """The vertices of a coal convex shape in its own frame, shape (k, 3) [m]."""
-    return np.array([shape.points(i) for i in range(shape.num_points)], dtype=float)
+    return np.array(shape.points(), dtype=float).reshape(-1, 3)
