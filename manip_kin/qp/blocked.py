@@ -40,17 +40,25 @@ def blocked_by(
     history: Sequence[QpOutput],
     min_position_progress: float = 1e-3,
     min_orientation_progress: float = 1e-2,
+    position_tolerance: float = 1e-3,
+    orientation_tolerance: float = 1e-2,
     active_fraction: float = 0.9,
 ) -> Blocked | None:
     """The blocking pair, or None when the goal still progresses or no collision constraint holds.
 
+    The goal is blocked when a component of its error (position or orientation) is still
+    above its tolerance and shrank by less than its minimum progress over ``history``, while
+    a collision constraint was binding in most of the outputs. (The other component may still
+    converge: a hand held off by an obstacle can finish turning, but it will not arrive.)
+
     Args:
-        history: consecutive outputs, oldest first (at least two), covering a short time.
-        min_position_progress: less shrinking of the position error over ``history`` than
-            this counts as stalled [m].
+        history: consecutive outputs, oldest first (at least two), covering a short time
+            (e.g. the last 0.3 s of cycles).
+        min_position_progress: less shrinking of the position error than this is a stall [m].
         min_orientation_progress: the same for the orientation error [rad].
-        active_fraction: in at least this share of the outputs a collision constraint must
-            be binding (0..1).
+        position_tolerance: a position error below this is reached, not stalled [m].
+        orientation_tolerance: an orientation error below this is reached [rad].
+        active_fraction: the share of outputs (0..1) in which a collision constraint must bind.
 
     Returns:
         :class:`Blocked` with the pair binding most often over ``history``.
@@ -60,7 +68,11 @@ def blocked_by(
     first, last = history[0], history[-1]
     position_progress = first.position_error_norm - last.position_error_norm
     orientation_progress = first.orientation_error_norm - last.orientation_error_norm
-    if position_progress >= min_position_progress or orientation_progress >= min_orientation_progress:
+    position_stalled = last.position_error_norm > position_tolerance and position_progress < min_position_progress
+    orientation_stalled = (
+        last.orientation_error_norm > orientation_tolerance and orientation_progress < min_orientation_progress
+    )
+    if not (position_stalled or orientation_stalled):
         return None
     counts: Counter[str] = Counter()
     held = 0
