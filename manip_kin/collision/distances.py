@@ -131,7 +131,7 @@ class CollisionChecker:
         self.mesh_search_path = mesh_search_path
         # From frame i to the moving frame of joint i (whose z is the joint axis), shape (n, 4, 4).
         self._to_moving = np.linalg.inv(model.chain.frame_offsets)
-        self._joint_frames = np.zeros((model.dof, 4, 4))
+        self._frames_now = np.tile(np.eye(4), (model.dof + 1, 1, 1))
         geometries = collision_model.geometries
         self._robot_count = len(geometries)
         self._robot_shapes = [g.shape.coal_shape for g in geometries]
@@ -201,7 +201,7 @@ class CollisionChecker:
 
     def _shape_poses(self, q: np.ndarray) -> np.ndarray:
         frames = model_frames(self.model, q)
-        self._joint_frames = np.matmul(frames[1:], self._to_moving)
+        self._frames_now = frames
         cm = self.collision_model
         return world_poses(frames, cm.frames, cm.offsets)
 
@@ -308,14 +308,15 @@ class CollisionChecker:
         ``(p × n)·z_j − n·(z_j × o_j)`` or ``n·z_j``: two small products per side, no (k, 3, n) array.
         """
         chain = self.model.chain
-        axes, origins = self._joint_frames[:, :3, 2], self._joint_frames[:, :3, 3]
-        moments = _cross(axes, origins)  # z_j × o_j, (n, 3)
-        normal_moment = normals @ moments.T
-        along = normals @ axes.T
-        revolute, prismatic = chain.revolute_mask, chain.prismatic_mask
-        row_first = (_cross(first, normals) @ axes.T - normal_moment) * revolute + along * prismatic
-        row_second = (_cross(second, normals) @ axes.T - normal_moment) * revolute + along * prismatic
-        return row_first * self._moves_first[rows] - row_second * self._moves_second[rows]
+        joint_frames = np.matmul(self._frames_now[1:], self._to_moving)
+        axes_t = joint_frames[:, :3, 2].T  # (3, n)
+        moments = _cross(joint_frames[:, :3, 2], joint_frames[:, :3, 3])  # z_j × o_j, (n, 3)
+        k = len(rows)
+        crossed = _cross(np.concatenate([first, second]), np.concatenate([normals, normals])) @ axes_t  # (2k, n)
+        common = (normals @ moments.T) * chain.revolute_mask - (normals @ axes_t) * chain.prismatic_mask
+        return (crossed[:k] * chain.revolute_mask - common) * self._moves_first[rows] - (
+            crossed[k:] * chain.revolute_mask - common
+        ) * self._moves_second[rows]
 
 
 _NEXT, _AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])

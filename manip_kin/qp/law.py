@@ -166,8 +166,8 @@ class QpController:
         Raises:
             InputError: as :meth:`manip_kin.control.CartesianController.step` for bad input.
         """
-        q = self.model.check_q(q)
-        task = self.pose_task.desired(q, goal_pose, goal_twist, dt)
+        task = self.pose_task.desired(q, goal_pose, goal_twist, dt)  # checks q, goal, twist and dt
+        q = np.asarray(q, dtype=float)
         desired = task.qdot
         jacobian = None
         if self.posture is not None:
@@ -219,7 +219,8 @@ class QpController:
         return tuple(names), tuple(held)
 
     def _output(self, task: ControlOutput, qdot: np.ndarray, status, box, acceleration, rows, **extra) -> QpOutput:
-        active, held = self._active(qdot, box, acceleration, rows)
+        # Unconstrained: the tasks' own rates satisfied every limit, so none binds.
+        active, held = ((), ()) if status is SolveStatus.UNCONSTRAINED else self._active(qdot, box, acceleration, rows)
         self._previous = qdot
         nearest = rows.nearest if rows is not None else None
         return QpOutput(
