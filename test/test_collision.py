@@ -142,6 +142,16 @@ def test_scene_shapes_rebuilt_only_when_the_version_moves(ball_arm):
     assert not checker.update_scene(scene)
     scene.clear()
     assert checker.update_scene(scene) and checker.obstacle_count == 0
+    # A mesh that cannot be found is left out with its reason; the other obstacles apply.
+    scene.add(make_obstacle(("cell", 2), "mesh", (1, 1, 1), np.eye(4), "package://nowhere/part.stl"))
+    scene.add(make_obstacle(("cell", 3), "sphere", (0.1, 0.1, 0.1), make_transform(None, [0.5, 0, 0.3])))
+    assert checker.update_scene(scene) and checker.obstacle_count == 1
+    (problem,) = checker.scene_problems
+    assert "obstacle 'cell'/2" in problem and "package://nowhere/part.stl" in problem
+    urdf = panda_files()[0]
+    mesh = f"file://{urdf.parents[1] / 'meshes' / 'collision' / 'hand.stl'}"
+    scene.add(make_obstacle(("cell", 2), "mesh", (1, 1, 1), make_transform(None, [0, 0.5, 0.3]), mesh))
+    assert checker.update_scene(scene) and checker.obstacle_count == 2 and not checker.scene_problems
 
 
 # --- pairs ------------------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ from manip_kin.collision.geometry import (
     sphere_gaps,
     world_poses,
 )
+from manip_kin.errors import ModelFileError
 from manip_kin.model import RobotModel
 from manip_kin.scene import Scene
 
@@ -140,6 +141,8 @@ class CollisionChecker:
         self._robot_transforms = [coal.Transform3s() for _ in geometries]
         self._request, self._result = coal.DistanceRequest(), coal.DistanceResult()
         self._scene_version: int | None = None
+        #: Why obstacles of the last scene taken were left out (empty: all were taken).
+        self.scene_problems: tuple[str, ...] = ()
         self._set_obstacles([], [])
 
     # --- scene ---------------------------------------------------------------------------------
@@ -147,14 +150,21 @@ class CollisionChecker:
     def update_scene(self, scene: Scene) -> bool:
         """Take the scene's obstacles if ``scene.version`` moved; True when rebuilt.
 
-        Raises:
-            ModelFileError: a mesh obstacle whose file cannot be loaded (the old obstacles stay).
+        An obstacle whose shape cannot be built (a mesh file not found or unreadable) is left
+        out, with its reason in :attr:`scene_problems`; the others apply.
         """
         if scene.version == self._scene_version:
             return False
-        obstacles = scene.obstacles
-        shapes = [obstacle_shape(obstacle, self.mesh_search_path) for obstacle in obstacles]
+        obstacles, shapes, problems = [], [], []
+        for obstacle in scene.obstacles:
+            try:
+                shapes.append(obstacle_shape(obstacle, self.mesh_search_path))
+            except ModelFileError as error:
+                problems.append(str(error))
+                continue
+            obstacles.append(obstacle)
         self._set_obstacles(obstacles, shapes)
+        self.scene_problems = tuple(problems)
         self._scene_version = scene.version
         return True
 

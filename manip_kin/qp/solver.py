@@ -1,8 +1,8 @@
 """The QP solve: daqp, a dense active-set solver, on ``min ½ xᵀHx + fᵀx, lower <= x <= upper, A x <= b``.
 
-Why daqp: on this problem (7 joint rates, 7 bounds, a handful of damper rows) it takes about
-6 µs median and 16 µs p99 per solve, where proxsuite's dense solver, updated in place, takes
-about 75 µs and 120 µs (measured on this machine, 300 random problems, docs/collision.md).
+Why daqp: on this problem (7 joint rates, 7 bounds, a handful of damper rows) it takes 6 to
+9 µs median per solve, where proxsuite's dense solver, updated in place, takes 65 to 75 µs
+(300 random problems of this shape, ``make bench`` section ``collision``, docs/collision.md).
 An active-set method suits a problem this small, and it is exact at the solution (no
 tolerance-bounded interior iterate), which the "QP equals today's law" test relies on.
 """
