@@ -132,7 +132,8 @@ class CollisionChecker:
         self.mesh_search_path = mesh_search_path
         # From frame i to the moving frame of joint i (whose z is the joint axis), shape (n, 4, 4).
         self._to_moving = np.linalg.inv(model.chain.frame_offsets)
-        self._frames_now = np.tile(np.eye(4), (model.dof + 1, 1, 1))
+        # Also builds the unrolled kinematics of every frame now, not in the first control cycle.
+        self._frames_now = model_frames(model, model.start_configuration())
         geometries = collision_model.geometries
         self._robot_count = len(geometries)
         self._robot_shapes = [g.shape.coal_shape for g in geometries]
