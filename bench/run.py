@@ -2,7 +2,8 @@
 """``make bench``: manip_kin's speed figures as a readable table and a JSON file.
 
 Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion``
-(control step, IK), ``closedform`` (closed-form IK, solve_ik with and without it), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
+(control step, IK), ``closedform`` (closed-form IK, solve_ik with and without it), ``collision``
+(the collision-aware QP step, coal's per-pair cost, daqp against proxsuite), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
 deviation), ``recorder`` (MCAP write cost, live recording throughput), ``liveview`` (the
 Foxglove live view's CPU with and without clients).
 
@@ -27,7 +28,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "closedform", "nodes", "recorder", "liveview")
+SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -148,6 +149,12 @@ def bench_closed_form(repeats: int, ik_targets: int) -> list[dict]:
     return run_closed_form_benchmarks(_time_calls, repeats, min(ik_targets, 500))
 
 
+def bench_collision() -> list[dict]:
+    from bench_collision import run_collision_benchmarks
+
+    return run_collision_benchmarks()
+
+
 def bench_nodes() -> list[dict]:
     from bench_nodes import run_node_benchmarks
 
@@ -233,6 +240,7 @@ def main() -> int:
         "core": lambda: bench_core(args.repeats),
         "motion": lambda: bench_motion(args.repeats, args.ik_targets),
         "closedform": lambda: bench_closed_form(args.repeats, args.ik_targets),
+        "collision": bench_collision,
         "nodes": bench_nodes,
         "recorder": bench_recorder,
         "liveview": bench_live_view,

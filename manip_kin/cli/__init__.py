@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "manip_kin.cli.teleop_command",
     "manip_kin.cli.move_command",
     "manip_kin.cli.control_commands",
+    "manip_kin.cli.collision_commands",
     "manip_kin.cli.recording_commands",
     "manip_kin.cli.plot_commands",
     "manip_kin.cli.demo_command",

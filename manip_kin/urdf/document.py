@@ -85,16 +85,11 @@ class UrdfTree:
         joint_type = element.get("type", "").strip()
         if joint_type not in URDF_JOINT_TYPES:
             raise self.fail(f"{where}@type", f"{joint_type!r}; valid: {', '.join(URDF_JOINT_TYPES)}")
-        origin = np.eye(4)
-        origin_element = element.find("origin")
-        if origin_element is not None:
-            xyz = self._numbers(origin_element, "xyz", f"{where}/origin@xyz", default=(0.0, 0.0, 0.0))
-            rpy = self._numbers(origin_element, "rpy", f"{where}/origin@rpy", default=(0.0, 0.0, 0.0))
-            origin = transform_from_xyz_rpy(xyz, rpy)
+        origin = self.origin(element, where)
         axis = np.array([1.0, 0.0, 0.0])  # the URDF default axis is x, not z
         axis_element = element.find("axis")
         if axis_element is not None:
-            axis = self._numbers(axis_element, "xyz", f"{where}/axis@xyz", default=(1.0, 0.0, 0.0))
+            axis = self.numbers(axis_element, "xyz", f"{where}/axis@xyz", default=(1.0, 0.0, 0.0))
             norm = float(np.linalg.norm(axis))
             if norm < 1e-12 and joint_type in MOVABLE_TYPES:
                 raise self.fail(f"{where}/axis@xyz", "has zero length; valid: a non-zero direction")
@@ -126,7 +121,17 @@ class UrdfTree:
             raise self.fail(f"{where}/{tag}@link", f"{name!r} is not a <link> of this robot")
         return name
 
-    def _numbers(self, element: ET.Element, attribute: str, field: str, default) -> np.ndarray:
+    def origin(self, element: ET.Element, where: str) -> np.ndarray:
+        """The transform of ``element``'s ``<origin xyz rpy>`` child (identity without one), shape (4, 4)."""
+        origin_element = element.find("origin")
+        if origin_element is None:
+            return np.eye(4)
+        xyz = self.numbers(origin_element, "xyz", f"{where}/origin@xyz", default=(0.0, 0.0, 0.0))
+        rpy = self.numbers(origin_element, "rpy", f"{where}/origin@rpy", default=(0.0, 0.0, 0.0))
+        return transform_from_xyz_rpy(xyz, rpy)
+
+    def numbers(self, element: ET.Element, attribute: str, field: str, default) -> np.ndarray:
+        """The whitespace-separated finite numbers of ``element@attribute`` (``default`` when absent)."""
         text = element.get(attribute)
         if text is None:
             return np.array(default, dtype=float)
