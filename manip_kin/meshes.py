@@ -20,7 +20,7 @@ def _package_share(package: str) -> Path | None:
         return None
     try:
         return Path(get_package_share_directory(package))
-    except (PackageNotFoundError, KeyError, ValueError, EnvironmentError):  # EnvironmentError: no AMENT_PREFIX_PATH
+    except (OSError, PackageNotFoundError, KeyError, ValueError):  # OSError: no AMENT_PREFIX_PATH
         return None
 
 

@@ -193,6 +193,7 @@ def _urdf_bodies(mujoco, spec, source: SpecSource, dynamics: JointDynamics) -> N
     if welded:
         source.notes.append(f"joints outside the chain are welded at zero: {', '.join(welded)}")
     bodies = {model.base_frame: spec.worldbody}
+    _collision_geoms(mujoco, spec, spec.worldbody, links.collisions.get(model.base_frame, ()), source, model.base_frame)
     subtree_mass: dict[str, list[float]] = {}  # moving link -> masses welded to it
     owner = {model.base_frame: None}
     pending = list(reader.child_joints[model.base_frame])
