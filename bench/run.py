@@ -3,7 +3,8 @@
 
 Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion``
 (control step, IK), ``closedform`` (closed-form IK, solve_ik with and without it), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
-deviation), ``recorder`` (MCAP write cost, live recording throughput).
+deviation), ``recorder`` (MCAP write cost, live recording throughput), ``physics`` (MuJoCo
+plant steps per second, robot_state's CPU and the tracking on both plants).
 
 Timings here are wall-clock on a shared 2-core machine: medians over many calls,
 p90 to show the spread. Targets come from the issues; a figure is a measurement, not
@@ -26,7 +27,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "closedform", "nodes", "recorder")
+SECTIONS = ("core", "motion", "closedform", "nodes", "recorder", "physics")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -183,6 +184,12 @@ def bench_recorder() -> list[dict]:
     return rows
 
 
+def bench_physics() -> list[dict]:
+    from bench_physics import run_physics_benchmarks
+
+    return run_physics_benchmarks()
+
+
 def _format_value(row: dict) -> str:
     parts = []
     for key, value in row.items():
@@ -228,6 +235,7 @@ def main() -> int:
         "closedform": lambda: bench_closed_form(args.repeats, args.ik_targets),
         "nodes": bench_nodes,
         "recorder": bench_recorder,
+        "physics": bench_physics,
     }
     for section in chosen:
         print(f"[bench] {section} ...", file=sys.stderr, flush=True)

@@ -20,6 +20,7 @@ import numpy as np
 
 from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
 from manip_kin.kinematics import frame_pose, jacobian
+from manip_kin.plant import PLANT_NAMES
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
 
@@ -55,6 +56,12 @@ def register(subparsers) -> None:
         "--offline-only", action="store_true", help="stop after the offline simulation (no ROS processes)"
     )
     parser.add_argument("--timeout", type=float, default=60.0, metavar="S", help="limit for each live leg [s]")
+    parser.add_argument(
+        "--plant",
+        choices=PLANT_NAMES,
+        default="kinematic",
+        help="what robot_state simulates: a perfect integrator (default) or MuJoCo physics (docs/physics.md)",
+    )
     add_namespace_argument(parser)
     parser.set_defaults(run=run_demo)
 
@@ -133,7 +140,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     if out.exists():
         out.unlink()
     _heading(
-        f"3/4 live pipeline at {args.rate:g} Hz (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})"
+        f"3/4 live pipeline at {args.rate:g} Hz, plant {args.plant} (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})"
     )
     controller = {
         "position_tolerance": TOLERANCE,
@@ -144,7 +151,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     generator = {"time_scaling": "trapezoidal", "max_linear_velocity": args.line_speed}
     recorder = NodeProcess("recorder", "recorder", {"output": str(out)})
     processes = [recorder] + pipeline_processes(
-        "genova7", rate_hz=args.rate, controller=controller, generator=generator
+        "genova7", rate_hz=args.rate, controller=controller, generator=generator, robot_state={"plant": args.plant}
     )
     exit_code = 0
     with Pipeline(processes, namespace=namespace) as pipeline:
