@@ -339,7 +339,7 @@ def _wake_up_rows() -> list[dict]:
     return rows
 
 
-def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None) -> dict:
+def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None, generator: dict | None = None) -> dict:
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -356,7 +356,12 @@ def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None) ->
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator={"time_scaling": "constant", "max_linear_velocity": 0.4, "max_angular_velocity": 1.0},
+        generator={
+            "time_scaling": "constant",
+            "max_linear_velocity": 0.4,
+            "max_angular_velocity": 1.0,
+            **(generator or {}),
+        },
         realtime_priority=priority,
         robot_state=robot_state,
     )

@@ -142,6 +142,25 @@ def tracking_rows(only_panda: bool = False) -> list[dict]:
         line = _line_row(500.0, 0, robot_state={"plant": plant})
         line["metric"] = f"{line['metric']}, plant {plant}"
         rows.append(line)
+    if not only_panda:
+        rows += line_remedy_rows()
+    return rows
+
+
+#: What brings the line back on the physics plant (docs/physics.md): a stiffer drive, or a line
+#: without velocity steps (trapezoidal, 2 m/s²) that the default drive can follow.
+LINE_REMEDIES = (
+    ("stiff servo 1000 1/s", {"servo_velocity_gain": 1000.0, "servo_integral_gain": 250000.0}, {}),
+    ("trapezoidal 2 m/s²", {}, {"time_scaling": "trapezoidal", "max_linear_acceleration": 2.0}),
+)
+
+
+def line_remedy_rows() -> list[dict]:
+    rows = []
+    for label, robot_state, generator in LINE_REMEDIES:
+        line = _line_row(500.0, 0, robot_state={"plant": "mujoco", **robot_state}, generator=generator)
+        line["metric"] = f"{line['metric']}, plant mujoco, {label}"
+        rows.append(line)
     return rows
 
 
