@@ -10,7 +10,6 @@ own forward kinematics, independently of MuJoCo.
 import math
 import re
 
-import mujoco
 import numpy as np
 import pytest
 from robot_data_files import PANDA, example_robot_data_urdf
@@ -126,6 +125,8 @@ def test_with_a_very_stiff_servo_the_physics_plant_tracks_the_kinematic_plant():
     # path (computed here from the default links); twice that for what the path changes in M. On top,
     # the discrete step: semi-implicit Euler moves q by the servo force of the step before, a lag of one
     # physics step h of motion, h · max|v| (measured: 5e-4 rad at h = 0.5 ms, 1e-4 at 0.1 ms).
+    import mujoco  # after manip_kin.plant, which chooses its OpenGL backend (the render test needs EGL)
+
     data = mujoco.MjData(physics.mj_model)
     data.qpos[:] = q0
     mujoco.mj_forward(physics.mj_model, data)

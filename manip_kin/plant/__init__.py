@@ -10,7 +10,13 @@ velocities, efforts, poses and twists as plain floats), ``set_scene(scene)`` and
 ``take_contact()``.
 """
 
-from manip_kin.plant.kinematic import KinematicPlant
+import os
+
+# mujoco picks its OpenGL backend when first imported, and every manip_kin import of it comes
+# through this package: without a display its default (GLFW) cannot render offscreen, EGL can.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from manip_kin.plant.kinematic import KinematicPlant  # noqa: E402
 
 #: Values of robot_state's ``plant`` parameter.
 PLANT_NAMES = ("kinematic", "mujoco")

@@ -3,7 +3,7 @@
 The recording's ``robot_description`` becomes the same MuJoCo model the physics plant uses
 (:mod:`manip_kin.plant.mujoco_model`: the URDF's collision shapes, or the default capsules of a
 robot YAML) and every picked joint state is drawn by MuJoCo's OpenGL renderer without a display:
-through EGL (``MUJOCO_GL=egl``, the default here; Debian packages ``libegl1``, ``libegl-mesa0``
+through EGL (``MUJOCO_GL=egl``, the default :mod:`manip_kin.plant` sets before mujoco is imported; Debian packages ``libegl1``, ``libegl-mesa0``
 and ``libgl1-mesa-dri``, which render on the CPU with llvmpipe where there is no GPU) or OSMesa
 (``MUJOCO_GL=osmesa``, package ``libosmesa6``).
 """
@@ -19,9 +19,6 @@ from manip_kin.errors import InvalidArgumentError, OperationError
 
 #: Picture size [pixels].
 WIDTH, HEIGHT = 640, 480
-
-# Read by mujoco when it is first imported: without a display, GLFW (its default) cannot render.
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def _renderer(mj_model):
