@@ -46,7 +46,7 @@ def register(subparsers) -> None:
         "--render",
         action="store_true",
         help="also draw the arm with MuJoCo's offscreen renderer (EGL; MUJOCO_GL=osmesa for OSMesa): "
-        "DIR/render_{start,middle,end}.png and DIR/render.gif, 60 frames",
+        "DIR/render_{start,middle,end}.png and DIR/render.gif, 60 frames, with the recorded collision_objects",
     )
     parser.add_argument(
         "--mesh-search-path",
@@ -66,10 +66,11 @@ def run_plot(args: argparse.Namespace) -> int:
         print(path)
     print(f"wrote {len(paths)} figures to {out_dir}", file=sys.stderr)
     if args.render:
-        from manip_kin.plant.render import render_run
+        from manip_kin.plant.render import recorded_scene, render_run
 
         print("rendering 60 frames with MuJoCo ...", file=sys.stderr, flush=True)
-        for path in render_run(run, out_dir, mesh_search_path=args.mesh_search_path):
+        scene = recorded_scene(source, args.namespace)
+        for path in render_run(run, out_dir, mesh_search_path=args.mesh_search_path, scene=scene):
             print(path)
     kind = "gif" if args.gif is not None else "mp4" if args.mp4 is not None else None
     if kind is not None:

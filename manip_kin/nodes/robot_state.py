@@ -301,8 +301,13 @@ class RobotStateNode(LoopingNode):
             changed = True
             for problem in apply_marker_array(self.scene, msg, self.base_frame):
                 self._warn("scene", f"{self._scene_sub.subscription.topic_name}: {problem}")
-        if changed and self.plant.set_scene(self.scene):
-            self.get_logger().info(f"scene: {len(self.scene)} obstacle(s) placed in the physics model")
+        if not changed:
+            return
+        try:
+            if self.plant.set_scene(self.scene):
+                self.get_logger().info(f"scene: {len(self.scene)} obstacle(s) placed in the physics model")
+        except ValueError as error:  # MuJoCo refused to compile it (a degenerate mesh...): the old scene stays
+            self._warn("scene", f"the scene could not be placed in the physics model: {error}")
 
     def _note_contact(self, report) -> None:
         """Keep the strongest contact until the next diagnostics; count contact onsets."""

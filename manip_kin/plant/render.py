@@ -34,15 +34,18 @@ def _renderer(mj_model):
         ) from None
 
 
-def _scene_spec(urdf_text: str, mesh_search_path: str):
-    """The arm of ``urdf_text`` as an MjSpec with a floor and lights (visual only), and its model."""
+def _scene_spec(urdf_text: str, mesh_search_path: str, scene):
+    """The arm of ``urdf_text`` and ``scene``'s obstacles with a floor and lights (visual only), compiled."""
     import mujoco
 
-    from manip_kin.plant.mujoco_model import JointDynamics, SpecSource, build_spec
+    from manip_kin.plant.mujoco_model import JointDynamics, SpecSource, add_obstacles, build_spec
     from manip_kin.urdf import load_urdf_string
 
     model = load_urdf_string(urdf_text, source="the recorded robot_description")
-    spec = build_spec(SpecSource(model, urdf_text, None, mesh_search_path), JointDynamics(), 1e-3)
+    source = SpecSource(model, urdf_text, None, mesh_search_path)
+    spec = build_spec(source, JointDynamics(), 1e-3)
+    if scene is not None:
+        add_obstacles(spec, scene, source)
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     world = spec.worldbody
@@ -57,8 +60,27 @@ def _scene_spec(urdf_text: str, mesh_search_path: str):
     return model, spec.compile()
 
 
-def render_run(run, out_dir: str | Path, frames: int = 60, mesh_search_path: str = "") -> list[Path]:
-    """Draw ``frames`` joint states of ``run`` (a :class:`~manip_kin.plotting.RunData`), evenly spread.
+def recorded_scene(path: str | Path, namespace: str = ""):
+    """The obstacles of a recording's ``collision_objects`` at its end (a :class:`~manip_kin.scene.Scene`),
+    or None when the recording has none; markers that are refused are left out."""
+    from manip_kin.nodes.scene_messages import TOPIC, apply_marker_array
+    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.recording import read_messages
+    from manip_kin.scene import Scene
+
+    scene, seen = Scene(), False
+    for _topic, message, _log_ns, _publish_ns in read_messages(
+        path, topics=[f"{normalize_namespace(namespace)}/{TOPIC}"]
+    ):
+        seen = True
+        frame = message.markers[0].header.frame_id if message.markers else ""
+        apply_marker_array(scene, message, frame)
+    return scene if seen else None
+
+
+def render_run(run, out_dir: str | Path, frames: int = 60, mesh_search_path: str = "", scene=None) -> list[Path]:
+    """Draw ``frames`` joint states of ``run`` (a :class:`~manip_kin.plotting.RunData`), evenly spread,
+    with the obstacles of ``scene`` (see :func:`recorded_scene`; None: none).
 
     Writes ``render_start.png``, ``render_middle.png``, ``render_end.png`` and ``render.gif``
     (10 frames per second of the GIF) into ``out_dir``; returns their paths.
@@ -72,7 +94,7 @@ def render_run(run, out_dir: str | Path, frames: int = 60, mesh_search_path: str
 
     if not run.robot_description or not len(run.joint_time):
         raise InvalidArgumentError("--render needs a recording with robot_description and joint_states")
-    model, mj_model = _scene_spec(run.robot_description, mesh_search_path)
+    model, mj_model = _scene_spec(run.robot_description, mesh_search_path, scene)
     data = mujoco.MjData(mj_model)
     columns = [run.joint_names.index(name) for name in model.joint_names if name in run.joint_names]
     if len(columns) != model.dof:
