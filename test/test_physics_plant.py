@@ -12,10 +12,13 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from robot_data_files import PANDA, example_robot_data_urdf
 
 from manip_kin.errors import ModelFileError
 from manip_kin.kinematics import frame_pose
+from manip_kin.meshes import resolve_mesh_uri
 from manip_kin.plant.kinematic import KinematicPlant
 from manip_kin.plant.mujoco_model import DEFAULT_LINEAR_DENSITY, MIN_LINK_MASS
 from manip_kin.plant.mujoco_plant import MujocoPlant, PhysicsConfig, ServoGains
@@ -201,3 +204,59 @@ def test_a_moving_link_without_mass_in_a_urdf_with_inertials_is_an_error_naming_
         MujocoPlant(
             model, model.start_configuration(), PhysicsConfig(), _without_inertials(PANDA_TEXT, ["panda_link3"])
         )
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    commands=st.lists(
+        st.lists(st.floats(-50.0, 50.0, allow_nan=False), min_size=7, max_size=7), min_size=1, max_size=6
+    ),
+    seconds=st.floats(0.0, 0.05),
+)
+def test_any_finite_commands_keep_the_physics_plant_finite_within_its_limits(commands, seconds):
+    # Commands far above the velocity limits, reversing at random, into the joint limits: the state
+    # stays finite, inside the position limits (MuJoCo's limits are soft: within 0.05), the drive
+    # torques within the effort limits and the speeds near the velocity limits.
+    plant = MujocoPlant(GENOVA7, GENOVA7.start_configuration(), PhysicsConfig(effort_limits=(30.0,) * 7))
+    for command in commands:
+        _run(plant, np.array(command), seconds + 0.001)
+        assert np.all(np.isfinite(plant.q)) and np.all(np.isfinite(plant.qdot))
+        assert np.all(np.isfinite(plant.ee)) and np.all(np.isfinite(plant.tool))
+        assert np.all(plant.q >= GENOVA7.lower - 0.05) and np.all(plant.q <= GENOVA7.upper + 0.05)
+        assert np.all(np.abs(plant.effort_values) <= 30.0 + 1e-9)
+        assert plant.velocity_scale <= 1.0
+
+
+def test_mesh_uris_resolve_through_the_search_path_file_uris_and_relative_paths(tmp_path):
+    mesh = tmp_path / "pkgs" / "my_arm" / "meshes" / "link.stl"
+    mesh.parent.mkdir(parents=True)
+    mesh.write_bytes(b"solid x\nendsolid x\n")
+    search = f"{tmp_path / 'elsewhere'}:{tmp_path / 'pkgs'}"
+    assert resolve_mesh_uri("package://my_arm/meshes/link.stl", search) == mesh
+    assert resolve_mesh_uri("package://my_arm/meshes/none.stl", search) is None
+    assert resolve_mesh_uri("package://other_arm/meshes/link.stl", search) is None
+    assert resolve_mesh_uri(f"file://{mesh}") == mesh
+    assert resolve_mesh_uri("meshes/link.stl", base_dir=mesh.parents[1]) == mesh
+    assert resolve_mesh_uri("https://example.invalid/link.stl", search) is None  # nothing is fetched
+
+
+def test_joint_states_with_effort_encode_as_rclpy_serialises_them():
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    from manip_kin.nodes.conversions import JointStateCdr
+
+    data = JointStateCdr(["a", "bb", "c"], with_effort=True).encode_values(
+        7_000_000_003, [1, 2, 3], [4, 5, 6], [7, 8, 9]
+    )
+    message = deserialize_message(data, JointState)
+    assert list(message.name) == ["a", "bb", "c"] and message.header.stamp.nanosec == 3
+    assert list(message.position) == [1, 2, 3] and list(message.velocity) == [4, 5, 6]
+    assert list(message.effort) == [7, 8, 9]
+
+
+def test_a_malformed_inertial_names_the_file_and_the_field():
+    text = PANDA_TEXT.replace('<mass value="0.646926"/>', '<mass value="heavy"/>')
+    model = load_robot(str(PANDA_PATH))
+    with pytest.raises(ModelFileError, match=r"link\[panda_link2\]/inertial/mass@value.*'heavy' is not numeric"):
+        MujocoPlant(model, model.start_configuration(), PhysicsConfig(), urdf_text=text)
