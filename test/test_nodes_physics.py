@@ -78,6 +78,7 @@ def test_a_box_on_collision_objects_shows_as_contact_force_on_diagnostics(harnes
 
 def test_the_controller_reaches_a_goal_on_the_physics_plant(harness):
     controller_rate = 250.0
+    states = harness.collect(JointState, "/joint_states")
     harness.start(RobotStateNode, robot="genova7", rate_hz=500.0, plant="mujoco")
     node = harness.start(CartesianControllerNode, robot="genova7", rate_hz=controller_rate, joint_state_timeout=1.0)
     goal = frame_pose(MODEL, Q0)
@@ -87,6 +88,8 @@ def test_the_controller_reaches_a_goal_on_the_physics_plant(harness):
     # 4.2 cm at the default gain 0.8/s: the default tolerance 1e-4 m after ln(0.042/1e-4)/0.8 ≈ 7.5 s on a
     # perfect integrator; the servo's lag (5 ms) and its gravity sag (which the loop corrects) add little.
     assert harness.spin_until(lambda: node.state == "converged", 15), node.state
+    # On physics: the drives carry the arm (gravity torques on the shoulder and elbow, genova7's joints 2 and 4).
+    assert len(states[-1].effort) == 7 and abs(states[-1].effort[1]) > 1.0 and abs(states[-1].effort[3]) > 1.0
 
 
 def test_robot_description_is_the_urdf_file_as_given(harness):
