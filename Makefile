@@ -14,7 +14,7 @@ export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH),)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: venv demo test lint format bench bench-anchors soak clean
+.PHONY: venv demo test lint format bench bench-anchors soak clean system-deps
 
 venv: $(STAMP)
 
@@ -34,8 +34,15 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 demo: $(STAMP)
 	$(VENV)/bin/manip_kin demo
 
-test: lint $(FOXGLOVE_CLIENT)
+test: lint system-deps $(FOXGLOVE_CLIENT)
 	$(VPY) -m pytest -q test
+
+# MuJoCo's offscreen renderer (`manip_kin plot --render` and its test) draws through EGL: Mesa's,
+# on the CPU where there is no GPU. Installed once where missing (needs root, as CI is).
+EGL_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+system-deps:
+	@dpkg -s $(EGL_PACKAGES) >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq $(EGL_PACKAGES); } \
+		|| echo "warning: could not install $(EGL_PACKAGES): manip_kin plot --render and its test need them" >&2
 
 # ruff (configured in ruff.toml): lint and format check; `make format` rewrites.
 lint: $(STAMP)

@@ -339,7 +339,7 @@ def _wake_up_rows() -> list[dict]:
     return rows
 
 
-def _line_row(rate_hz: float, priority: int) -> dict:
+def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None, generator: dict | None = None) -> dict:
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -356,8 +356,9 @@ def _line_row(rate_hz: float, priority: int) -> dict:
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator=IRB120_LINE_GENERATOR,
+        generator={**IRB120_LINE_GENERATOR, **(generator or {})},
         realtime_priority=priority,
+        robot_state=robot_state,
     )
     label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
     with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_line_")) as pipeline:

@@ -5,7 +5,8 @@ Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion`
 (control step, IK), ``closedform`` (closed-form IK, solve_ik with and without it), ``collision``
 (the collision-aware QP step, coal's per-pair cost, daqp against proxsuite), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
 deviation), ``recorder`` (MCAP write cost, live recording throughput), ``liveview`` (the
-Foxglove live view's CPU with and without clients).
+Foxglove live view's CPU with and without clients), ``physics`` (MuJoCo
+plant steps per second, robot_state's CPU and the tracking on both plants).
 
 Timings here are wall-clock on a shared 2-core machine: medians over many calls,
 p90 to show the spread. Targets come from the issues; a figure is a measurement, not
@@ -28,7 +29,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview")
+SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -197,6 +198,12 @@ def bench_live_view() -> list[dict]:
     return run_live_view_benchmarks()
 
 
+def bench_physics() -> list[dict]:
+    from bench_physics import run_physics_benchmarks
+
+    return run_physics_benchmarks()
+
+
 def _format_value(row: dict) -> str:
     parts = []
     for key, value in row.items():
@@ -244,6 +251,7 @@ def main() -> int:
         "nodes": bench_nodes,
         "recorder": bench_recorder,
         "liveview": bench_live_view,
+        "physics": bench_physics,
     }
     for section in chosen:
         print(f"[bench] {section} ...", file=sys.stderr, flush=True)

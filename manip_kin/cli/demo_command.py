@@ -25,6 +25,7 @@ import numpy as np
 from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose, jacobian
+from manip_kin.plant import PLANT_NAMES
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
 
@@ -68,6 +69,12 @@ def register(subparsers) -> None:
     )
     parser.add_argument(
         "--live-port", type=int, default=8765, metavar="PORT", help="port of the live view (default 8765)"
+    )
+    parser.add_argument(
+        "--plant",
+        choices=PLANT_NAMES,
+        default="kinematic",
+        help="what robot_state simulates: a perfect integrator (default) or MuJoCo physics (docs/physics.md)",
     )
     add_namespace_argument(parser)
     parser.set_defaults(run=run_demo)
@@ -144,7 +151,9 @@ def demo_processes(args: argparse.Namespace, out: Path, controller: dict, genera
     from manip_kin.pipeline import NodeProcess, pipeline_processes
 
     processes = [NodeProcess("recorder", "recorder", {"output": str(out)})]
-    processes += pipeline_processes("genova7", rate_hz=args.rate, controller=controller, generator=generator)
+    processes += pipeline_processes(
+        "genova7", rate_hz=args.rate, controller=controller, generator=generator, robot_state={"plant": args.plant}
+    )
     if args.live:
         processes.append(NodeProcess("live_view", "live_view", {"port": args.live_port}, ready_status="live_view"))
     return processes
@@ -160,7 +169,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     if out.exists():
         out.unlink()
     _heading(
-        f"3/4 live pipeline at {args.rate:g} Hz (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})"
+        f"3/4 live pipeline at {args.rate:g} Hz, plant {args.plant} (ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}, discovery {env['ROS_AUTOMATIC_DISCOVERY_RANGE']})"
     )
     controller = {
         "position_tolerance": TOLERANCE,

@@ -42,6 +42,18 @@ def register(subparsers) -> None:
     parser.add_argument(
         "--frames", type=int, default=150, metavar="N", help="animation frames, evenly spread over the run (150)"
     )
+    parser.add_argument(
+        "--render",
+        action="store_true",
+        help="also draw the arm with MuJoCo's offscreen renderer (EGL; MUJOCO_GL=osmesa for OSMesa): "
+        "DIR/render_{start,middle,end}.png and DIR/render.gif, 60 frames, with the recorded collision_objects",
+    )
+    parser.add_argument(
+        "--mesh-search-path",
+        default="",
+        metavar="DIRS",
+        help="':'-separated directories holding packages, for the URDF's package:// meshes (--render)",
+    )
     parser.set_defaults(run=run_plot)
 
 
@@ -53,6 +65,13 @@ def run_plot(args: argparse.Namespace) -> int:
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} figures to {out_dir}", file=sys.stderr)
+    if args.render:
+        from manip_kin.plant.render import recorded_scene, render_run
+
+        print("rendering 60 frames with MuJoCo ...", file=sys.stderr, flush=True)
+        scene = recorded_scene(source, args.namespace)
+        for path in render_run(run, out_dir, mesh_search_path=args.mesh_search_path, scene=scene):
+            print(path)
     kind = "gif" if args.gif is not None else "mp4" if args.mp4 is not None else None
     if kind is not None:
         from manip_kin.arm_animation import write_animation

@@ -127,14 +127,16 @@ class TwistStampedCdr:
 
 
 class JointStateCdr:
-    """Serialised ``sensor_msgs/JointState`` with fixed names, positions and velocities (no effort).
+    """Serialised ``sensor_msgs/JointState`` with fixed names, positions, velocities and optional efforts.
 
     Args:
         names: joint names, model order.
         frame_id: the header's frame id (empty for joint states, as robot drivers send them).
+        with_effort: True: the message carries ``effort`` (n values, a physics plant's joint
+            torques/forces [N·m | N]); False: ``effort`` is empty (a kinematic plant has none).
     """
 
-    def __init__(self, names: Sequence[str], frame_id: str = ""):
+    def __init__(self, names: Sequence[str], frame_id: str = "", with_effort: bool = False):
         layout = _CdrLayout()
         self._frame = layout.header(frame_id)
         self._frame_length = len(self._frame)
@@ -144,36 +146,43 @@ class JointStateCdr:
             data = layout.add_string(name)
             self._names += [len(data), data]
         count = len(names)
-        for _ in range(2):  # position, velocity
+        for _ in range(3 if with_effort else 2):  # position, velocity (, effort)
             layout.add("I", 4)
             if count:
                 layout.add("d", 8, count)
-        layout.add("I", 4)  # effort: empty
+        if not with_effort:
+            layout.add("I", 4)  # effort: empty
         self._count = count
+        self._with_effort = with_effort
         self._struct = layout.compile()
 
-    def encode(self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray) -> bytes:
-        """CDR bytes of ``position`` and ``velocity`` (shape (n,)) stamped ``stamp_ns``."""
-        sec, nanosec = _stamp_parts(stamp_ns)
-        n = self._count
-        return self._struct.pack(
-            _CDR_LE,
-            sec,
-            nanosec,
-            self._frame_length,
-            self._frame,
-            *self._names,
-            n,
-            *position.tolist(),
-            n,
-            *velocity.tolist(),
-            0,
+    def encode(
+        self, stamp_ns: int, position: np.ndarray, velocity: np.ndarray, effort: np.ndarray | None = None
+    ) -> bytes:
+        """CDR bytes of ``position``, ``velocity`` (and ``effort`` when built with it), shape (n,), stamped ``stamp_ns``."""
+        return self.encode_values(
+            stamp_ns, position.tolist(), velocity.tolist(), None if effort is None else effort.tolist()
         )
 
-    def encode_values(self, stamp_ns: int, position, velocity) -> bytes:
-        """CDR bytes of positions and velocities given as float sequences of length n."""
+    def encode_values(self, stamp_ns: int, position, velocity, effort=None) -> bytes:
+        """CDR bytes of positions, velocities (and efforts when built with them) as float sequences of length n."""
         sec, nanosec = _stamp_parts(stamp_ns)
         n = self._count
+        if self._with_effort:
+            return self._struct.pack(
+                _CDR_LE,
+                sec,
+                nanosec,
+                self._frame_length,
+                self._frame,
+                *self._names,
+                n,
+                *position,
+                n,
+                *velocity,
+                n,
+                *effort,
+            )
         return self._struct.pack(
             _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names, n, *position, n, *velocity, 0
         )

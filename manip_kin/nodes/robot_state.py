@@ -1,16 +1,17 @@
-"""``robot_state``: a simulated arm that integrates joint-rate commands and publishes its state.
+"""``robot_state``: a simulated arm driven by joint-rate commands that publishes its state.
 
-The node holds one :class:`JointIntegrator` (plain numpy) and, every cycle of its
-:class:`~manip_kin.nodes.rate_loop.RateLoop`, takes the latest command, integrates it
-and publishes ``joint_states``, ``ee_pose``, ``tool_pose``, ``ee_twist`` and
-``tool_twist``. ``robot_description`` is published once, transient local.
+The node holds one plant (:mod:`manip_kin.plant`, chosen by parameter ``plant``: the
+kinematic integrator, or MuJoCo physics with a velocity servo per joint) and, every cycle
+of its :class:`~manip_kin.nodes.rate_loop.RateLoop`, hands it the latest command and
+publishes ``joint_states``, ``ee_pose``, ``tool_pose``, ``ee_twist`` and ``tool_twist``.
+``robot_description`` is published once, transient local: the URDF file as given (as
+robot_state_publisher does), or one generated for a robot YAML.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from operator import mul
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -18,11 +19,10 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
 
 from manip_kin.bounds import InputBounds
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.joint_integration import integrate_joint_rates
-from manip_kin.kinematics import compiled_kinematics
 from manip_kin.model import RobotModel
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.params import (
@@ -36,13 +36,18 @@ from manip_kin.nodes.params import (
     period_ns,
     usage_text,
 )
+from manip_kin.nodes.physics_params import PHYSICS_PARAMETERS, make_plant
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.scene_messages import TOPIC as COLLISION_OBJECTS
+from manip_kin.nodes.scene_messages import apply_marker_array
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.nodes.visuals import RobotVisuals
-from manip_kin.robots import bundled_robot_names
-from manip_kin.urdf import model_to_urdf
+from manip_kin.plant import KinematicPlant
+from manip_kin.robots import bundled_robot_names, is_urdf_path, resolve_robot_path
+from manip_kin.scene import Scene
+from manip_kin.urdf import model_to_urdf, with_chain_hint
 
 NODE_NAME = "robot_state"
 
@@ -94,6 +99,7 @@ PARAMETERS = (
         zero_is_off=True,
     ),
     ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", minimum=0.02, maximum=120.0),
+    *PHYSICS_PARAMETERS,
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -104,132 +110,32 @@ USAGE = usage_text(
     "position and velocity limits (a command above a velocity limit is scaled down as a whole,\n"
     "keeping its direction) and publishes the joint state, the end-effector and tool poses and\n"
     "twists every cycle. A command older than command_timeout counts as zero; a command with the\n"
-    "wrong length or a non-finite value is rejected with a log line.",
+    "wrong length or a non-finite value is rejected with a log line. With plant:=mujoco the arm\n"
+    "is MuJoCo physics stepped at physics_rate_hz: gravity, a PI velocity servo per joint with\n"
+    "the URDF's effort limits, joint damping/armature/friction, and contact with the obstacles on\n"
+    "collision_objects (contact force on /diagnostics); joint_states then carries effort.",
     PARAMETERS,
     subscribes=[
-        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order")
+        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
+        (COLLISION_OBJECTS, "visualization_msgs/MarkerArray", "obstacles in the base frame (plant mujoco)"),
     ],
     publishes=[
-        ("joint_states", "sensor_msgs/JointState", "name, position, velocity, stamped"),
+        ("joint_states", "sensor_msgs/JointState", "name, position, velocity (plant mujoco: effort), stamped"),
         ("ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
         ("tool_pose", "geometry_msgs/PoseStamped", "tool (end effector if no tool) in the base frame"),
         ("ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
         ("tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
-        ("robot_description", "std_msgs/String", "URDF of the model, once, transient local"),
+        ("robot_description", "std_msgs/String", "the URDF file as given (YAML robots: generated), transient local"),
         ("/tf, /tf_static", "tf2_msgs/TFMessage", "link transforms, where tf2_msgs is installed"),
         ("markers", "visualization_msgs/MarkerArray", "goal axes, planned path, tool trail, joint limits"),
-        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state"),
+        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state, contact force"),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000  (robots: {', '.join(bundled_robot_names())})",
 )
 
 
-class JointIntegrator:
-    """Joint positions integrated from velocity commands within the limits (plain Python floats).
-
-    The cycle runs on float lists and the model's unrolled kinematics: at this size a
-    numpy call costs more than the arithmetic it saves. Arrays are offered as properties
-    for callers outside the loop.
-
-    Args:
-        model: the robot.
-        q0: start positions, shape (n,), inside the limits.
-
-    Attributes:
-        q_values: current positions [rad | m], n floats.
-        qdot_values: velocity of the last step [rad/s | m/s], n floats: the commanded rate
-            after limiting, zero for a joint stopped at a position limit.
-        ee_values, tool_values: end-effector and tool poses in base, 16 row-major floats.
-        ee_twist_values, tool_twist_values: ``(wx, wy, wz, vx, vy, vz)`` w.r.t. base in base
-            [rad/s, m/s].
-        velocity_scale: factor (<= 1) the last command was scaled by to respect the velocity limits.
-    """
-
-    def __init__(self, model: RobotModel, q0: np.ndarray):
-        self.model = model
-        n = model.dof
-        self._n = n
-        self.q_values = [float(v) for v in q0]
-        self.qdot_values = [0.0] * n
-        self._lower = model.lower.tolist()
-        self._upper = model.upper.tolist()
-        self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
-        self._tool_chain = compiled_kinematics(model, model.frame_index(model.default_frame), True)
-        self._ee_chain = compiled_kinematics(model, model.dof + 1, False) if model.has_tool else None
-        self.velocity_scale = 1.0
-        self._update_kinematics()
-
-    def step(self, command: np.ndarray | None, dt: float) -> None:
-        """Advance by ``dt`` seconds with joint rates ``command`` (None: zero), shape (n,)."""
-        n = self._n
-        if command is None or not dt >= 1e-9:  # below the clock's resolution: no step (1/dt would overflow)
-            if self.velocity_scale == 1.0 and not any(self.qdot_values):
-                return  # at rest and still at rest: poses unchanged, twists zero
-            self.qdot_values = [0.0] * n
-            self.velocity_scale = 1.0
-        else:
-            self.q_values, self.qdot_values, self.velocity_scale, _ = integrate_joint_rates(
-                self.q_values, command.tolist(), dt, self._lower, self._upper, self._inverse_velocity_limits
-            )
-        self._update_kinematics()
-
-    def _update_kinematics(self) -> None:
-        n = self._n
-        values = self._tool_chain(self.q_values)
-        tool = values[:16]
-        qdot = self.qdot_values
-        # Twist of the tool (ee when no tool) = J q̇, J rows [angular; linear] after the pose.
-        twist = [sum(map(mul, values[16 + r * n : 16 + (r + 1) * n], qdot)) for r in range(6)]
-        self.tool_values = tool
-        self.tool_twist_values = twist
-        if self._ee_chain is None:
-            self.ee_values = tool
-            self.ee_twist_values = twist
-            return
-        ee = self._ee_chain(self.q_values)
-        self.ee_values = ee
-        # Same rigid body: v_ee = v_tool + ω × (p_ee - p_tool).
-        wx, wy, wz, vx, vy, vz = twist
-        rx, ry, rz = ee[3] - tool[3], ee[7] - tool[7], ee[11] - tool[11]
-        self.ee_twist_values = [wx, wy, wz, vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx]
-
-    # --- arrays for callers outside the loop ---------------------------------------------------
-
-    @property
-    def q(self) -> np.ndarray:
-        """Current positions, shape (n,)."""
-        return np.array(self.q_values)
-
-    @property
-    def qdot(self) -> np.ndarray:
-        """Velocity of the last step, shape (n,)."""
-        return np.array(self.qdot_values)
-
-    @property
-    def ee(self) -> np.ndarray:
-        """End-effector pose in base, shape (4, 4)."""
-        return np.array(self.ee_values).reshape(4, 4)
-
-    @property
-    def tool(self) -> np.ndarray:
-        """Tool pose in base (the end effector when there is no tool), shape (4, 4)."""
-        return np.array(self.tool_values).reshape(4, 4)
-
-    @property
-    def ee_twist(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(angular, linear)`` of the end effector, each shape (3,)."""
-        return np.array(self.ee_twist_values[:3]), np.array(self.ee_twist_values[3:])
-
-    @property
-    def tool_twist(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(angular, linear)`` of the tool, each shape (3,)."""
-        return np.array(self.tool_twist_values[:3]), np.array(self.tool_twist_values[3:])
-
-    @property
-    def at_limit(self) -> np.ndarray:
-        """Joints on a position limit, shape (n,) bool."""
-        q = self.q_values
-        return np.array([q[i] <= self._lower[i] or q[i] >= self._upper[i] for i in range(self._n)])
+#: The kinematic plant under its former name (tests and callers from before the plants).
+JointIntegrator = KinematicPlant
 
 
 def initial_positions(model: RobotModel, values) -> np.ndarray:
@@ -248,13 +154,18 @@ def initial_positions(model: RobotModel, values) -> np.ndarray:
 
 
 class RobotStateNode(LoopingNode):
-    """ROS handles around one :class:`JointIntegrator`."""
+    """ROS handles around one plant (:mod:`manip_kin.plant`)."""
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
         params = declare_parameters(self, PARAMETERS)
         self.model = load_node_model(self, params)
-        self.integrator = JointIntegrator(self.model, initial_positions(self.model, params["initial_positions"]))
+        self.urdf_text = self._description_text(params)
+        q0 = initial_positions(self.model, params["initial_positions"])
+        self.plant = make_plant(self.model, q0, params, self.urdf_text if self._from_urdf else None)
+        for note in getattr(self.plant, "notes", ()):
+            self.get_logger().info(f"plant {self.plant.name}: {note}")
+        self.scene = Scene()
         self.base_frame = params["base_frame"] or self.model.base_frame
         self.rate_hz = params["rate_hz"]
         self._set_parameters(params)
@@ -284,12 +195,19 @@ class RobotStateNode(LoopingNode):
         self._last_diagnostics_ns = 0
         self.rejected_commands = 0
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
+        self._with_effort = self.plant.effort_values is not None
+        if self._with_effort:
+            self._joint_state_cdr = conv.JointStateCdr(self.model.joint_names, with_effort=True)
+            self._scene_sub = PolledSubscription(self, MarkerArray, COLLISION_OBJECTS, 10)
+        self._contact = None  # the strongest contact since the last diagnostics
+        self._in_contact = False
+        self.contact_events = 0
 
-        urdf_text = self._publish_description()
+        self._description_pub.publish(String(data=self.urdf_text))
         self.visuals = RobotVisuals(
             self,
             self.model,
-            urdf_text,
+            self.urdf_text,
             params["frame_prefix"],
             params["tf_rate_hz"],
             params["markers_rate_hz"],
@@ -298,8 +216,8 @@ class RobotStateNode(LoopingNode):
         self.visuals.publish_static(time.time_ns())
         self.get_logger().info(self.visuals.tf_log)
         self.get_logger().info(
-            f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, "
-            f"q0 = {np.round(self.integrator.q, 4).tolist()}, frame {self.base_frame!r}"
+            f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, plant {self.plant.name}, "
+            f"q0 = {np.round(self.plant.q, 4).tolist()}, frame {self.base_frame!r}"
         )
         self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"])
 
@@ -311,10 +229,25 @@ class RobotStateNode(LoopingNode):
             rate = params["diagnostics_rate_hz"]
             self._diagnostics_period_ns = period_ns(rate)
 
-    def _publish_description(self) -> str:
-        urdf_text = model_to_urdf(self.model)
-        self._description_pub.publish(String(data=urdf_text))
-        return urdf_text
+    @property
+    def integrator(self):
+        """The plant (its name from before there were two kinds)."""
+        return self.plant
+
+    def _description_text(self, params: dict) -> str:
+        """The URDF to publish: the file as given, as robot_state_publisher does (with one element naming the
+        chain when ``tip_link``/``tool_link`` chose it), or one generated from a robot YAML."""
+        self._from_urdf = bool(params["robot"]) and is_urdf_path(params["robot"])
+        if not self._from_urdf:
+            return model_to_urdf(self.model)
+        path = resolve_robot_path(params["robot"])
+        text = path.read_text(encoding="utf-8", errors="replace")
+        if params["tip_link"] or params["tool_link"]:
+            from manip_kin.urdf.document import UrdfTree
+
+            tip = params["tip_link"] or UrdfTree(text, str(path)).default_tip(self.model.base_frame)
+            text = with_chain_hint(text, tip, params["tool_link"] or None)
+        return text
 
     def _take_commands(self, now_ns: int) -> None:
         dof = self.model.dof
@@ -334,10 +267,11 @@ class RobotStateNode(LoopingNode):
     def publish_safe_output(self) -> None:
         """After a failed cycle: hold position (drop the command; the state again, at zero velocity)."""
         self._command = None
-        integrator = self.integrator
+        plant = self.plant
         stamp_ns = self.ros_time_ns()
+        zeros = [0.0] * self.model.dof
         self._joint_state_pub.publish(
-            self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, [0.0] * self.model.dof)
+            self._joint_state_cdr.encode_values(stamp_ns, plant.q_values, zeros, plant.effort_values and zeros)
         )
 
     def _cycle(self, now_ns: int) -> None:
@@ -349,42 +283,90 @@ class RobotStateNode(LoopingNode):
         command = self._command
         if command is not None and now_ns - self._command_time_ns > self.command_timeout_ns:
             command = None
-        integrator = self.integrator
-        integrator.step(command, dt)
+        plant = self.plant
+        if self._with_effort:
+            self._take_scene()
+        plant.step(command, dt)
+        if self._with_effort:
+            self._note_contact(plant.take_contact())
 
         # System time is ROS time unless use_sim_time (checked once at start).
         stamp_ns = self.ros_time_ns()
         self._joint_state_pub.publish(
-            self._joint_state_cdr.encode_values(stamp_ns, integrator.q_values, integrator.qdot_values)
+            self._joint_state_cdr.encode_values(stamp_ns, plant.q_values, plant.qdot_values, plant.effort_values)
         )
-        self._ee_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.ee_values))
-        self._tool_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, integrator.tool_values))
-        self._ee_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.ee_twist_values))
-        self._tool_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, integrator.tool_twist_values))
-        self.visuals.cycle(now_ns, stamp_ns, integrator.q_values, integrator.tool_values)
+        self._ee_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, plant.ee_values))
+        self._tool_pose_pub.publish(self._pose_cdr.encode_values(stamp_ns, plant.tool_values))
+        self._ee_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, plant.ee_twist_values))
+        self._tool_twist_pub.publish(self._twist_cdr.encode_values(stamp_ns, plant.tool_twist_values))
+        self.visuals.cycle(now_ns, stamp_ns, plant.q_values, plant.tool_values)
 
         if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
             self._last_diagnostics_ns = now_ns
             self._publish_diagnostics(conv.ns_to_stamp(stamp_ns), now_ns, command is not None)
 
+    def _take_scene(self) -> None:
+        """Apply new collision_objects arrays; the plant rebuilds its scene when it changed."""
+        changed = False
+        while (msg := self._scene_sub.take()) is not None:
+            changed = True
+            for problem in apply_marker_array(self.scene, msg, self.base_frame):
+                self._warn("scene", f"{self._scene_sub.subscription.topic_name}: {problem}")
+        if not changed:
+            return
+        try:
+            if self.plant.set_scene(self.scene):
+                self.get_logger().info(f"scene: {len(self.scene)} obstacle(s) placed in the physics model")
+        except ValueError as error:  # MuJoCo refused to compile it (a degenerate mesh...): the old scene stays
+            self._warn("scene", f"the scene could not be placed in the physics model: {error}")
+
+    def _note_contact(self, report) -> None:
+        """Keep the strongest contact until the next diagnostics; count contact onsets."""
+        if report is None:
+            self._in_contact = False
+            return
+        if not self._in_contact:
+            self.contact_events += 1
+            self._in_contact = True
+        if self._contact is None or report.force > self._contact.force:
+            self._contact = report
+
+    def _contact_values(self) -> tuple[list[tuple[str, str]], str]:
+        """The contact keys of /diagnostics (none for the kinematic plant) and the pair in contact ("" when none)."""
+        if not self._with_effort:
+            return [], ""
+        contact, self._contact = self._contact, None
+        pair = f"{contact.link} | {contact.obstacle}" if contact else ""
+        return [
+            ("contact_force_max", f"{contact.force:.3f}" if contact else "0"),
+            ("contact_pair", pair),
+            ("contact_events", str(self.contact_events)),
+            ("obstacles", str(len(self.scene))),
+            ("efforts", ",".join(f"{e:.3f}" for e in self.plant.effort_values)),
+        ], pair
+
     def _publish_diagnostics(self, stamp, now_ns: int, command_fresh: bool) -> None:
-        integrator = self.integrator
+        plant = self.plant
         if self._command is None:
             command_state = "none yet"
         else:
             command_state = "fresh" if command_fresh else "stale (counted as zero)"
-        limited = [self.model.joint_names[i] for i in np.flatnonzero(integrator.at_limit)]
+        limited = [self.model.joint_names[i] for i in np.flatnonzero(plant.at_limit)]
         values = [
             ("robot", self.model.name),
             ("command", command_state),
             ("command_age_s", f"{(now_ns - self._command_time_ns) * 1e-9:.4f}" if self._command is not None else "inf"),
             ("rejected_commands", str(self.rejected_commands)),
             ("joints_at_limit", ",".join(limited)),
-            ("velocity_scale", f"{integrator.velocity_scale:.4f}"),
+            ("velocity_scale", f"{plant.velocity_scale:.4f}"),
             ("loop_error", self.loop_error()),
-        ] + stats_key_values(self.loop.stats())
-        level = self.diagnostic_level("warn" if limited or self.rejected_commands else "ok")
-        status = conv.make_diagnostic_status(self.status_name, level, command_state, self.model.name, values)
+            ("plant", self.plant.name),
+        ]
+        contact, pair = self._contact_values()
+        values += contact + stats_key_values(self.loop.stats())
+        level = self.diagnostic_level("warn" if limited or self.rejected_commands or pair else "ok")
+        message = f"{command_state}; contact {pair}" if pair else command_state
+        status = conv.make_diagnostic_status(self.status_name, level, message, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(stamp, [status]))
 
 

@@ -35,11 +35,12 @@ the Panda TCP and the UR5 tool flange, name the tip::
 """
 
 from manip_kin.urdf.chain import joints_without_velocity_limit, load_urdf, load_urdf_string
-from manip_kin.urdf.writer import model_to_urdf
+from manip_kin.urdf.writer import model_to_urdf, with_chain_hint
 
 __all__ = [
     "joints_without_velocity_limit",
     "load_urdf",
     "load_urdf_string",
     "model_to_urdf",
+    "with_chain_hint",
 ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -192,3 +193,13 @@ def model_to_urdf(model: RobotModel) -> str:
     ET.SubElement(robot, CHAIN_HINT_ELEMENT, **hint)
     ET.indent(robot, space="  ")
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+
+
+def with_chain_hint(urdf_text: str, tip_link: str, tool_link: str | None = None) -> str:
+    """``urdf_text`` unchanged but for one element naming its chain (what :func:`model_to_urdf` writes),
+    so a reader given no link names (a controller reading ``robot_description``) takes this chain."""
+    attributes = f" tip_link={quoteattr(tip_link)}" + (f" tool_link={quoteattr(tool_link)}" if tool_link else "")
+    end = urdf_text.rfind("</robot>")
+    if end < 0:
+        return urdf_text
+    return f"{urdf_text[:end]}  <{CHAIN_HINT_ELEMENT}{attributes}/>\n{urdf_text[end:]}"
