@@ -91,10 +91,16 @@ PROGRESS_FRACTION = 0.02
 
 
 class GoalKind(StrEnum):
-    """What the controller is tracking: a pose goal or a joint reference (the latest wins)."""
+    """What the controller follows: the latest command of any kind wins."""
 
-    POSE = "pose"
-    JOINT = "joint"
+    POSE = "pose"  # goal_pose (+ goal_twist feed-forward)
+    JOINT = "joint"  # joint_reference
+    TWIST = "twist"  # twist_command: the controlled frame's velocity
+    JOG = "jog"  # joint_jog: some joints' velocities
+
+
+#: Commands that are velocities: they expire after ``command_timeout`` without a new one.
+SERVO_KINDS = (GoalKind.TWIST, GoalKind.JOG)
 
 
 @dataclass(frozen=True)
@@ -119,12 +125,14 @@ class ControllerSupervisorConfig:
     joint_tolerance: float = 1e-3
     task: Task = FULL_TASK
     progress_window: float = PROGRESS_WINDOW_S
+    command_timeout: float = 0.1
 
     def __post_init__(self):
         _check_seconds("joint_state_timeout", self.joint_state_timeout)
         _check_seconds("goal_timeout", self.goal_timeout, allow_zero=True)
         _check_seconds("goal_twist_timeout", self.goal_twist_timeout)
         _check_seconds("progress_window", self.progress_window)
+        _check_seconds("command_timeout", self.command_timeout)
         for name in ("position_tolerance", "orientation_tolerance", "joint_tolerance"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -204,6 +212,7 @@ class ControllerSupervisor:
         self._joint_state_timeout_ns = int(config.joint_state_timeout * 1e9)
         self._goal_timeout_ns = int(config.goal_timeout * 1e9)
         self._twist_timeout_ns = int(config.goal_twist_timeout * 1e9)
+        self._command_timeout_ns = int(config.command_timeout * 1e9)
         self.state = ControllerState.IDLE
         self.detail = "no goal yet"
         self.goal_kind: GoalKind | None = None
@@ -223,6 +232,7 @@ class ControllerSupervisor:
         self._joint_state_timeout_ns = int(config.joint_state_timeout * 1e9)
         self._goal_timeout_ns = int(config.goal_timeout * 1e9)
         self._twist_timeout_ns = int(config.goal_twist_timeout * 1e9)
+        self._command_timeout_ns = int(config.command_timeout * 1e9)
         self.config = config
         self.throttle.period_ns = int(diagnostics_period_ns)
         self.progress.window_ns = int(config.progress_window * 1e9)
@@ -286,7 +296,12 @@ class ControllerSupervisor:
         elif now_ns - self._q_time_ns > self._joint_state_timeout_ns:
             self._set(ControllerState.STALE_INPUT, f"joint state {(now_ns - self._q_time_ns) * 1e-9:.2f} s old")
         elif self.goal_kind is None:
-            self._set(ControllerState.IDLE, "no goal yet")
+            if self.state is not ControllerState.IDLE:
+                self._set(ControllerState.IDLE, "no goal yet")
+        elif self.goal_kind in SERVO_KINDS and now_ns - self._goal_time_ns > self._command_timeout_ns:
+            what = self.goal_kind
+            self.goal_kind = None
+            self._set(ControllerState.IDLE, f"no {what} command for {self.config.command_timeout:g} s: halted")
         elif self._goal_timeout_ns and now_ns - self._goal_time_ns > self._goal_timeout_ns:
             what = "goal" if self.goal_kind is GoalKind.POSE else "joint reference"
             self._set(ControllerState.STALE_INPUT, f"{what} {(now_ns - self._goal_time_ns) * 1e-9:.2f} s old")
@@ -348,6 +363,14 @@ class ControllerSupervisor:
             )
         else:
             self._classify_limits(limited, "moving towards the goal")
+
+    def servo_step_done(self, limited_joints: Sequence[int], singular: bool, scale: float) -> None:
+        """Classify a twist or jog step (a velocity command never converges): singular when
+        the motion is slowed by more than half for a singularity, else tracking or joint-limited."""
+        if singular or scale < 0.5:
+            self._set(ControllerState.SINGULAR, f"{self.goal_kind} command slowed to {scale:.0%} near a singularity")
+        else:
+            self._classify_limits(limited_joints, f"following the {self.goal_kind} command")
 
     def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool) -> None:
         """Classify a joint tracking step: converged when the reference rests (or its velocity

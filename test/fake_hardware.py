@@ -75,8 +75,10 @@ class FakeHardware:
         self._lock = threading.Lock()
         #: False: no joint_states go out (the arm's driver went quiet), the arm still moves.
         self.publishing = True
-        #: The arm joint positions after each integration step: the path the arm took.
+        #: The arm joint positions after each integration step: the path the arm took, and
+        #: when (time.monotonic()).
         self.history: list[np.ndarray] = []
+        self.history_times: list[float] = []
         self._context = rclpy.Context()
         rclpy.init(context=self._context, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         self.node = rclpy.create_node("fake_hardware", namespace=namespace, context=self._context)
@@ -120,6 +122,7 @@ class FakeHardware:
                 self.q = self.q + self._command * dt
             q = self.q.copy()
             self.history.append(q)
+            self.history_times.append(now)
         if not self.publishing:
             return
         msg = JointState()

@@ -7,30 +7,17 @@ finite differences of the stream the arm received against the limits, the arm's 
 (FK of its positions), a numeric Jacobian's singular values.
 """
 
-import itertools
-import math
-import os
-
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
-from fake_hardware import FakeHardware
-from geometry_msgs.msg import PoseStamped
+from held_arm import RATE, assert_stream_within, call_service, held_speed, send_goal, start_held_arm
 from kin_reference import numeric_geometric_jacobian
 from node_harness import Harness, statuses
 from std_srvs.srv import SetBool, Trigger
 
 from manip_kin.joint_limits import JointLimits
 from manip_kin.kinematics import frame_pose
-from manip_kin.nodes import conversions as conv
-from manip_kin.nodes.cartesian_controller import CartesianControllerNode
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, rpy_to_matrix
-from manip_kin.urdf import model_to_urdf
-
-RATE = 250.0
-_arms = itertools.count()
-SLACK = 1e-6  # relative, on the limits: the stream's values are what ruckig computed, rounded
 
 
 @pytest.fixture
@@ -40,88 +27,37 @@ def harness():
     h.close()
 
 
-def _arm(harness, robot: str, q0, **params):
-    """The fake arm and the controller in a namespace of their own: no other test's node can
-    add to the command stream the arm records."""
-    model = load_robot(robot)
-    namespace = f"/safety_{os.getpid()}_{next(_arms)}"
-    hardware = FakeHardware(
-        model_to_urdf(model),
-        q0,
-        rate_hz=2 * RATE,
-        command_timeout=math.inf,
-        command_topic="joint_velocity_commands",
-        namespace=namespace,
-    )
-    diagnostics = harness.collect(DiagnosticArray, "/diagnostics")
-    params.setdefault("joint_state_timeout", 0.3)
-    node = harness.start(CartesianControllerNode, namespace=namespace, robot=robot, rate_hz=RATE, **params)
-    harness.executor.add_node(node)  # serve its ~/stop and ~/pause
-    node.test_namespace = namespace
-    harness.wait_matched(f"{namespace}/goal_pose", PoseStamped)
-    assert harness.spin_until(lambda: node.q is not None, 5)
-    return model, hardware, node, diagnostics
-
-
-def _send(harness, node, pose, frame="base_link"):
-    msg = conv.make_pose_stamped(pose, frame, harness.node.get_clock().now().to_msg())
-    harness.publish(f"{node.test_namespace}/goal_pose", msg)
-    return conv.stamp_key(msg.header.stamp)
-
-
-def _call(harness, srv_type, name, request):
-    client = harness.node.create_client(srv_type, name)
-    assert client.wait_for_service(timeout_sec=5)
-    future = client.call_async(request)
-    assert harness.spin_until(future.done, 5)
-    return future.result()
-
-
-def _speed(hardware) -> float:
-    """The largest joint rate the arm moves on now."""
-    command = hardware.held_command()
-    return 0.0 if command is None else float(np.max(np.abs(command)))
-
-
-def assert_stream_within(commands: np.ndarray, limits: JointLimits, dt: float) -> None:
-    """Every command's finite-difference acceleration and jerk within the limits."""
-    stream = np.vstack([np.zeros((2, commands.shape[1])), commands])
-    acceleration = np.diff(stream, axis=0) / dt
-    jerk = np.diff(acceleration, axis=0) / dt
-    ratio_a = np.max(np.abs(acceleration) / limits.acceleration)
-    ratio_j = np.max(np.abs(jerk) / limits.jerk)
-    assert ratio_a <= 1 + SLACK and ratio_j <= 1 + SLACK, (ratio_a, ratio_j)
-
-
 def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
     """A goal, a reversal, a pause, a resume, a stale joint state and a stop: the stream the arm
     received stays within the acceleration and jerk limits cycle to cycle, and ends in zeros."""
-    model, hardware, node, _ = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    model, hardware, node, _ = start_held_arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
         limits = JointLimits.of(model)
         start = frame_pose(model, hardware.positions())
         away = start.copy()
         away[:3, 3] += [0.05, -0.1, 0.08]
-        _send(harness, node, away)
-        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
+        send_goal(harness, node, away)
+        assert harness.spin_until(lambda: held_speed(hardware) > 0.05, 5)
         harness.spin_for(0.15)
-        _send(harness, node, start)  # reversal
+        send_goal(harness, node, start)  # reversal
         harness.spin_for(0.3)
-        assert _call(
+        assert call_service(
             harness, SetBool, f"{node.test_namespace}/cartesian_controller/pause", SetBool.Request(data=True)
         ).success
         assert harness.spin_until(lambda: node.state == "paused" and not np.any(hardware.held_command()), 3)
         q_paused = hardware.positions()
         harness.spin_for(0.2)
         np.testing.assert_array_equal(hardware.positions(), q_paused)  # held still, exactly
-        _call(harness, SetBool, f"{node.test_namespace}/cartesian_controller/pause", SetBool.Request(data=False))
-        _send(harness, node, away)
-        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
+        call_service(harness, SetBool, f"{node.test_namespace}/cartesian_controller/pause", SetBool.Request(data=False))
+        send_goal(harness, node, away)
+        assert harness.spin_until(lambda: held_speed(hardware) > 0.05, 5)
         hardware.publishing = False  # the driver goes quiet: stale input, come to rest
         assert harness.spin_until(lambda: node.state == "stale input" and node.command_filter.at_rest, 3)
         hardware.publishing = True
-        assert harness.spin_until(lambda: _speed(hardware) > 0.05, 5)
-        assert _call(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request()).success
+        assert harness.spin_until(lambda: held_speed(hardware) > 0.05, 5)
+        assert call_service(
+            harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request()
+        ).success
         assert harness.spin_until(lambda: node.state == "stopped" and not np.any(hardware.held_command()), 3)
         assert node.supervisor.goal_kind is None  # the goal was dropped
         commands = np.array([values for _, values in hardware.commands])
@@ -133,13 +69,13 @@ def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
 
 
 def test_a_goal_after_a_stop_is_followed_and_converges(harness):
-    model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    model, hardware, node, diagnostics = start_held_arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
-        _call(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request())
+        call_service(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request())
         assert harness.spin_until(lambda: node.state == "stopped", 3)
         goal = frame_pose(model, hardware.positions())
         goal[:3, 3] += [0.0, 0.0, 0.03]
-        stamp = _send(harness, node, goal)
+        stamp = send_goal(harness, node, goal)
         assert harness.spin_until(lambda: node.state == "converged", 10)
         np.testing.assert_allclose(frame_pose(model, hardware.positions())[:3, 3], goal[:3, 3], atol=2e-4)
         assert any(
@@ -151,9 +87,9 @@ def test_a_goal_after_a_stop_is_followed_and_converges(harness):
 
 
 def _unreachable(harness, robot, q0, goal, **params):
-    model, hardware, node, diagnostics = _arm(harness, robot, q0, **params)
+    model, hardware, node, diagnostics = start_held_arm(harness, robot, q0, **params)
     try:
-        _send(harness, node, goal)
+        send_goal(harness, node, goal)
         assert harness.spin_until(lambda: node.state == "unreachable", 8), (node.state, node.detail)
         assert harness.spin_until(lambda: node.command_filter.at_rest and not np.any(hardware.held_command()), 2)
         q = hardware.positions()
@@ -194,9 +130,9 @@ def test_a_goal_beyond_a_joint_limit_is_unreachable_naming_the_joint(harness):
 
 
 def test_a_goal_rejected_for_its_frame_is_reported_with_the_reason(harness):
-    model, hardware, node, diagnostics = _arm(harness, "genova7", load_robot("genova7").start_configuration())
+    model, hardware, node, diagnostics = start_held_arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
-        stamp = _send(harness, node, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
+        stamp = send_goal(harness, node, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
         assert harness.spin_until(lambda: node.rejected_stamp == stamp, 3)
         assert "'world'" in node.last_rejection and "base_link" in node.last_rejection
 

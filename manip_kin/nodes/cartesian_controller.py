@@ -39,9 +39,17 @@ from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, Throttled
 from manip_kin.nodes.robot_description import joints_problem
 from manip_kin.nodes.robot_model import load_node_model
 from manip_kin.nodes.runner import run_node
+from manip_kin.nodes.servo_inputs import ServoInputs
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
+from manip_kin.servo import SingularityScaling
 from manip_kin.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
-from manip_kin.supervisors import ControllerState, ControllerSupervisor, ControllerSupervisorConfig, GoalKind
+from manip_kin.supervisors import (
+    SERVO_KINDS,
+    ControllerState,
+    ControllerSupervisor,
+    ControllerSupervisorConfig,
+    GoalKind,
+)
 
 
 class CartesianControllerNode(LoopingNode):
@@ -81,6 +89,8 @@ class CartesianControllerNode(LoopingNode):
         self._twist_sub = PolledSubscription(self, TwistStamped, "goal_twist", 10)
         self._reference_sub = PolledSubscription(self, JointState, "joint_reference", 10)
         self._references = JointReferenceReader(self.model)
+        self.servo = ServoInputs(self, ThrottledLog(self.get_logger().warning, 1.0))
+        self.servo.configure(self.model, self._singularity)
         self._command_pub = self.create_publisher(Float64MultiArray, "joint_velocity_commands", STREAM_DEPTH)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._command_cdr = conv.Float64ArrayCdr(self.model.dof)
@@ -118,6 +128,7 @@ class CartesianControllerNode(LoopingNode):
         )
         self._state_log = ThrottledLog(self.get_logger().info, 0.0)
         self._logged_state = self.state
+        self._logged_kind = None
         # A new goal runs a cycle at once instead of waiting for the next tick.
         self.start_loop(
             self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"], wake_on=(self._goal_sub,)
@@ -167,6 +178,9 @@ class CartesianControllerNode(LoopingNode):
         else:
             self.command_filter = CommandFilter(limits, self.model.lower, self.model.upper, self.dt, limit_velocity)
         self.stop_time = params["stop_time"]
+        self._singularity = SingularityScaling(params["singularity_slowdown_start"], params["singularity_hard_stop"])
+        if hasattr(self, "servo"):
+            self.servo.configure(self.model, self._singularity)
         # The law keeps q + q̇·horizon within the position limits: with the horizon of a stop
         # from full speed, a joint nears a limit as slowly as the filter lets it stop, so the
         # law (not only the filter's braking) knows the joint is held and redistributes the task.
@@ -193,6 +207,7 @@ class CartesianControllerNode(LoopingNode):
             joint_tolerance=params["joint_tolerance"],
             task=controller.task,
             progress_window=params["progress_window"],
+            command_timeout=params["command_timeout"],
         )
 
     def _set_parameters(self, updates: dict) -> str | None:
@@ -290,18 +305,28 @@ class CartesianControllerNode(LoopingNode):
                 )
                 continue
             reference_stamp = msg.header.stamp
-        # The latest goal of either kind wins; when both came in one cycle, the later stamp.
-        quiet_before = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
-        if pose_stamp is not None and (
-            reference_stamp is None or conv.stamp_to_ns(pose_stamp) > conv.stamp_to_ns(reference_stamp)
-        ):
-            self.goal_stamp = conv.stamp_key(pose_stamp)
-            self.supervisor.goal_received(now_ns, GoalKind.POSE)
-        elif reference_stamp is not None:
-            self.goal_stamp = conv.stamp_key(reference_stamp)
-            self.supervisor.goal_received(now_ns, GoalKind.JOINT, bool(self.reference[1].any()))
-        else:
+        # The latest command of any kind wins; when several came in one cycle, the latest stamp.
+        taken = [
+            (conv.stamp_to_ns(stamp), kind)
+            for stamp, kind in ((pose_stamp, GoalKind.POSE), (reference_stamp, GoalKind.JOINT))
+            if stamp is not None
+        ]
+        taken += self.servo.take()
+        if not taken:
             return
+        stamp_ns, kind = max(taken, key=lambda item: item[0])
+        previous = self.supervisor.goal_kind
+        if kind in SERVO_KINDS:
+            if kind is not previous:
+                self.servo.started(kind)
+            self.supervisor.goal_received(now_ns, kind)
+            return  # a stream of velocities: no goal stamp, no report of each
+        quiet_before = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
+        self.goal_stamp = conv.stamp_key(conv.ns_to_stamp(stamp_ns))
+        if kind is GoalKind.POSE:
+            self.supervisor.goal_received(now_ns, GoalKind.POSE)
+        else:
+            self.supervisor.goal_received(now_ns, GoalKind.JOINT, bool(self.reference[1].any()))
         self._goal_arrival_ns = now_ns
         # A goal after a quiet spell (not a line's stream): say at once that it was taken.
         self._report_now = self._report_now or quiet_before
@@ -368,8 +393,20 @@ class CartesianControllerNode(LoopingNode):
         if supervisor.gate(now_ns):
             try:
                 q = self.law_positions()
-                if supervisor.goal_kind is GoalKind.JOINT:
+                kind = supervisor.goal_kind
+                if kind is GoalKind.JOINT:
                     target = self._joint_step(now_ns, q)
+                elif kind is GoalKind.TWIST:
+                    self.output, target = self.servo.twist_step(self.controller, q, now_ns, self.dt, self.limit_horizon)
+                    limited = set(self.output.limited_joints) | set(self.command_filter.braking_joints)
+                    supervisor.servo_step_done(sorted(limited), self.output.singular, self.servo.scale)
+                elif kind is GoalKind.JOG:
+                    config = self.controller.config
+                    self.joint_output = self.servo.jog_step(
+                        q, now_ns, self.dt, self.limit_horizon, self.gain_joint, config
+                    )
+                    target = self.joint_output.qdot
+                    supervisor.servo_step_done(self.joint_output.limited_joints, False, 1.0)
                 else:
                     twist_fresh = supervisor.feed_forward_fresh(now_ns)
                     output = self.controller.step(
@@ -389,19 +426,26 @@ class CartesianControllerNode(LoopingNode):
             # Wake on a goal after a quiet spell (a new goal: react at once); not while goals
             # stream in every cycle (a line), which keeps the loop on its own schedule.
             self.waiter.enabled = now_ns - self._goal_arrival_ns > self._goal_stream_gap_ns
-        if supervisor.state != self._logged_state:
+        if supervisor.state != self._logged_state or supervisor.goal_kind != self._logged_kind:
             self._log_state_change()
         if supervisor.report_due(now_ns) or self._report_now:
             self._report_now = False
             self._publish_diagnostics(now_ns)
 
     def _log_state_change(self) -> None:
-        """One INFO line per change into or out of a halted or unreachable state."""
-        state = self.supervisor.state
+        """One INFO line per change of the command type, and per change into or out of a
+        halted or unreachable state."""
+        supervisor = self.supervisor
+        state, kind = supervisor.state, supervisor.goal_kind
         previous, self._logged_state = self._logged_state, state
+        previous_kind, self._logged_kind = self._logged_kind, kind
         halted = (ControllerState.UNREACHABLE, ControllerState.PAUSED, ControllerState.STOPPED)
-        if state in halted or previous in halted:
-            self._state_log(f"state:{state}", f"{previous} -> {state}: {self.supervisor.detail}")
+        if kind != previous_kind:
+            self._state_log(
+                f"kind:{kind}", f"command {previous_kind or 'none'} -> {kind or 'none'}: {supervisor.detail}"
+            )
+        elif state in halted or previous in halted:
+            self._state_log(f"state:{state}", f"{previous} -> {state}: {supervisor.detail}")
 
     def _limits_text(self) -> str:
         limits = self.command_filter.limits
@@ -483,6 +527,10 @@ class CartesianControllerNode(LoopingNode):
             ("rejected_stamp", self.rejected_stamp),
             ("last_rejection", self.last_rejection),
             ("base_frame", self.base_frame),
+            ("controlled_frame", self.model.frame_name(self.controller.frame_index)),
+            ("servo_scale", f"{self.servo.scale:.4f}"),
+            ("servo_sigma_min", f"{self.servo.sigma_min:.4g}"),
+            ("rejected_servo_commands", str(self.servo.rejected)),
             ("command_filter", self.command_filter.result),
             ("braking_joints", ",".join(self.model.joint_names[i] for i in self.command_filter.braking_joints)),
             ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),

@@ -197,6 +197,37 @@ PARAMETERS = (
         tunable=True,
     ),
     diagnostics_rate(10.0, "rate of /diagnostics (also sent at once on a state change)"),
+    # MoveIt Servo's incoming_command_timeout is 0.1 s; a teleop stream comes at 50 Hz or more.
+    ParamSpec(
+        "command_timeout",
+        "float",
+        0.1,
+        "a twist_command or joint_jog older than this halts the arm (smoothly, within the limits)",
+        "s",
+        minimum=1e-3,
+        maximum=60.0,
+        tunable=True,
+    ),
+    # Smallest singular values of the task Jacobian, as singular_threshold (manip_kin.servo).
+    ParamSpec(
+        "singularity_slowdown_start",
+        "float",
+        0.05,
+        "twist commands that move towards a singularity slow down once the task Jacobian's smallest singular "
+        "value is below this",
+        minimum=1e-6,
+        maximum=10.0,
+        tunable=True,
+    ),
+    ParamSpec(
+        "singularity_hard_stop",
+        "float",
+        0.01,
+        "... and stop at this one (motion away from the singularity is never slowed); below the start",
+        minimum=1e-7,
+        maximum=10.0,
+        tunable=True,
+    ),
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -228,6 +259,12 @@ USAGE = usage_text(
         ("goal_pose", "geometry_msgs/PoseStamped", "goal of the controlled frame, frame_id = base frame"),
         ("goal_twist", "geometry_msgs/TwistStamped", "feed-forward velocity of the goal, base frame"),
         ("joint_reference", "sensor_msgs/JointState", "joint positions + velocities to follow (trajectory_generator)"),
+        (
+            "twist_command",
+            "geometry_msgs/TwistStamped",
+            "velocity of the controlled frame, in frame_id (base, the frame, a link)",
+        ),
+        ("joint_jog", "sensor_msgs/JointState", "names + velocities of any joints to jog"),
         ("joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
     ],
     publishes=[
