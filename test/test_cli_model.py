@@ -72,6 +72,7 @@ def test_robots_lists_every_bundled_robot(capsys):
         "upper": 0.3,
         "velocity": 0.5,
         "unit": "m",
+        "link": "link6",
     }
 
 
