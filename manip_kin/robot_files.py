@@ -134,15 +134,17 @@ def _check_yaml_events(text: str, source: str) -> None:
                 anchor_sizes[anchor] = count
 
 
-def parse_yaml(data: bytes, source: str) -> Any:
-    """A robot YAML document, parsed within the caps.
+def parse_yaml(data: bytes | str, source: str, max_bytes: int = MAX_YAML_BYTES) -> Any:
+    """A YAML document (a robot YAML, bag metadata), parsed within the caps.
 
     Raises:
-        ModelFileError: too large, invalid UTF-8, malformed, too deep, too many nodes or
-            aliases; the field is the line and column.
+        ModelFileError: larger than ``max_bytes``, invalid UTF-8, malformed, too deep, too
+            many nodes or aliases; the field is the line and column.
     """
-    if len(data) > MAX_YAML_BYTES:
-        raise ModelFileError(source, "<file>", f"larger than {MAX_YAML_BYTES} bytes; valid: a robot YAML up to that")
+    if isinstance(data, str):
+        data = data.encode("utf-8", "surrogatepass")
+    if len(data) > max_bytes:
+        raise ModelFileError(source, "<file>", f"larger than {max_bytes} bytes; valid: a YAML document up to that")
     text = decode_utf8(data, source)
     loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     try:

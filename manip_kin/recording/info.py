@@ -7,10 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
+from manip_kin.recording.chunks import ChunkError, mapped
 from manip_kin.recording.errors import CorruptRecordingError, RecordingError
 from manip_kin.recording.files import DECODE_ERRORS, check_complete, recording_files, salvage_hint
 from manip_kin.recording.metadata import MCAP_METADATA_KEY, MCAP_METADATA_NAME
@@ -146,12 +146,18 @@ class RecordingInfo:
 
 
 def _iso(ns: int) -> str:
-    moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.UTC)
+    try:
+        moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.UTC)
+    except (ValueError, OverflowError, OSError):  # a damaged time beyond the calendar
+        return f"{ns} ns (not a calendar date)"
     return moment.isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
 def _human_time(ns: int) -> str:
-    moment = datetime.datetime.fromtimestamp(ns // 1_000_000_000).astimezone()
+    try:
+        moment = datetime.datetime.fromtimestamp(ns // 1_000_000_000).astimezone()
+    except (ValueError, OverflowError, OSError):
+        return f"{ns} ns (not a calendar date)"
     return f"{moment:%b %d %Y %H:%M:%S}.{ns % 1_000_000_000:09d} ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
 
 
@@ -172,6 +178,19 @@ def _size_on_disk(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
+def _ros_distro(serialized_metadata: str, file_path: Path) -> str:
+    """``ros_distro`` of the rosbag2 metadata record ('' when it has none); YAML within the caps."""
+    from manip_kin.errors import ModelFileError
+    from manip_kin.robot_files import parse_yaml
+
+    try:
+        document = parse_yaml(serialized_metadata, f"{file_path} rosbag2 metadata record")
+    except ModelFileError as error:
+        raise CorruptRecordingError(f"{error}; {salvage_hint(file_path)}") from None
+    distro = document.get("ros_distro", "") if isinstance(document, dict) else ""
+    return distro if isinstance(distro, str) else ""
+
+
 def read_info(path: str | Path) -> RecordingInfo:
     """Summarize a recording from its summary sections (no message is decoded).
 
@@ -188,8 +207,8 @@ def read_info(path: str | Path) -> RecordingInfo:
     for file_path in files:
         check_complete(file_path)
         try:
-            with open(file_path, "rb") as stream:
-                reader = SeekingReader(stream, record_size_limit=file_path.stat().st_size)
+            with mapped(file_path) as stream:
+                reader = SeekingReader(stream, record_size_limit=len(stream))
                 header = reader.get_header()
                 profile, library = header.profile, header.library
                 summary = reader.get_summary()
@@ -214,10 +233,11 @@ def read_info(path: str | Path) -> RecordingInfo:
                 compressions.update(ci.compression or "none" for ci in summary.chunk_indexes)
                 for record in reader.iter_metadata():
                     if record.name == MCAP_METADATA_NAME and MCAP_METADATA_KEY in record.metadata:
-                        document = yaml.safe_load(record.metadata[MCAP_METADATA_KEY]) or {}
-                        ros_distro = str(document.get("ros_distro", "") or ros_distro)
-        except CorruptRecordingError:
-            raise
+                        ros_distro = _ros_distro(record.metadata[MCAP_METADATA_KEY], file_path) or ros_distro
+        except CorruptRecordingError as error:
+            if not isinstance(error, ChunkError):
+                raise
+            raise CorruptRecordingError(f"{file_path} is damaged ({error}); {salvage_hint(file_path)}") from None
         except DECODE_ERRORS as error:
             raise CorruptRecordingError(
                 f"{file_path} is damaged ({type(error).__name__}: {error}); {salvage_hint(file_path)}"
