@@ -1,7 +1,7 @@
 """Hostile robot files, loaded by ``manip_kin fk --json`` in a process bounded by setrlimit.
 
-Run as a script (``python hostile_robot_files.py OUT.json``) by ``test_hostile_robot_files.py``:
-it caps its own CPU time (RLIMIT_CPU) and address space (RLIMIT_AS), then loads
+Run as a script (``python hostile_robot_files.py OUT.json N``) by ``test_hostile_robot_files.py``:
+it caps its own CPU time and address space (:mod:`bounded_cli`), then loads
 
 * the cases of issue 29, one file each (:data:`CASES`), and
 * hypothesis mutations of real robot files (the bundled YAMLs, the test URDFs and a URDF
@@ -16,21 +16,15 @@ seconds of CPU each (a per-case ITIMER_PROF alarm turns a hang into a failure).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 import os
 import re
-import resource
-import signal
 import sys
 import tempfile
 from pathlib import Path
 
-CPU_SECONDS = 60  # the whole process (RLIMIT_CPU); the parent's timeout is above it
-CASE_CPU_SECONDS = 5  # one file (ITIMER_PROF)
-ADDRESS_SPACE_BYTES = 1 << 30  # 1 GiB (RLIMIT_AS); the unbounded alias bomb took 2.1 GB
+from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli
 
 REPO = Path(__file__).resolve().parent.parent
 HOSTILE_NUMBERS = [
@@ -132,28 +126,12 @@ CASES["urdf_entity_bomb"] = (
 
 
 def outcome(path: Path) -> dict:
-    """Run ``manip_kin fk --robot PATH --json`` in this process: exit code, stdout, stderr, error."""
-    from manip_kin.cli import main
-
-    stdout, stderr = io.StringIO(), io.StringIO()
-    result: dict = {"path": str(path)}
-    signal.setitimer(signal.ITIMER_PROF, CASE_CPU_SECONDS)
-    try:
-        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-            result["rc"] = main(["fk", "--robot", str(path), "--json"])
-    except BaseException as error:  # noqa: BLE001 - what escapes the CLI is the finding
-        result["rc"] = None
-        result["escaped"] = f"{type(error).__name__}: {str(error)[:200]}"
-    finally:
-        signal.setitimer(signal.ITIMER_PROF, 0)
-    result["stdout"], result["stderr"] = stdout.getvalue()[:2000], stderr.getvalue()[:2000]
-    return result
+    """``manip_kin fk --robot PATH --json`` in this process (see :func:`bounded_cli.run_cli`)."""
+    return {"path": str(path), **run_cli(["fk", "--robot", str(path), "--json"])}
 
 
 def problem_with(result: dict) -> str | None:
     """Why an outcome breaks the rules, or None."""
-    if result["rc"] is None:
-        return f"escaped the CLI: {result['escaped']}"
     if result["rc"] == 0:
 
         def no_constant(name):
@@ -167,14 +145,10 @@ def problem_with(result: dict) -> str | None:
         if not all(math.isfinite(v) for v in numbers):
             return "exit 0 with a non-finite pose"
         return None
-    if result["rc"] != 2:
-        return f"exit {result['rc']}, not 0 or 2: {result['stderr']}"
-    lines = result["stderr"].strip().splitlines()
-    if len(lines) != 1:
-        return f"stderr is {len(lines)} lines, not one: {result['stderr'][:500]}"
-    if result["path"] not in lines[0] or "field '" not in lines[0]:
-        return f"the error does not name the file and the field: {lines[0]}"
-    return None
+    problem = one_line_refusal_problem(result, result["path"])
+    if problem is None and "field '" not in result["stderr"]:
+        return f"the error does not name the field: {result['stderr']}"
+    return problem
 
 
 def _write(directory: Path, name: str, content: bytes) -> Path:
@@ -267,13 +241,7 @@ def run_hypothesis(directory: Path, examples: int) -> str | None:
 
 
 def main(out: str, examples: int) -> None:
-    resource.setrlimit(resource.RLIMIT_CPU, (CPU_SECONDS, CPU_SECONDS))
-    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE_BYTES, ADDRESS_SPACE_BYTES))
-
-    def out_of_time(signum, frame):
-        raise TimeoutError(f"more than {CASE_CPU_SECONDS} s of CPU for one file")
-
-    signal.signal(signal.SIGPROF, out_of_time)
+    limit_this_process()
     results: dict = {}
     with tempfile.TemporaryDirectory() as directory:
         for case, (name, content) in CASES.items():

@@ -9,13 +9,13 @@ loop fails the test instead of the machine.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from hostile_robot_files import CASE_CPU_SECONDS, CASES, CPU_SECONDS, problem_with
+from bounded_cli import CASE_CPU_SECONDS, run_bounded_script
+from hostile_robot_files import CASES, problem_with
 
 HERE = Path(__file__).resolve().parent
 EXAMPLES = 150
@@ -24,16 +24,7 @@ EXAMPLES = 150
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory) -> dict:
     out = tmp_path_factory.mktemp("hostile_files") / "outcomes.json"
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(HERE)}
-    completed = subprocess.run(
-        [sys.executable, str(HERE / "hostile_robot_files.py"), str(out), str(EXAMPLES)],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=CPU_SECONDS * 2,
-    )
-    assert completed.returncode == 0, f"the bounded loader process died: {completed.stderr[-3000:]}"
-    return json.loads(out.read_text())
+    return run_bounded_script("hostile_robot_files.py", out, str(EXAMPLES))
 
 
 # What each issue case must be refused for (a word of the field or the problem).

@@ -28,8 +28,12 @@ from mcap.records import Channel, Chunk, Message, Schema
 
 from manip_kin.recording.errors import CorruptRecordingError
 
-#: Largest uncompressed chunk read [bytes]; the writer's chunks are about 1 MiB.
+#: Largest uncompressed chunk read [bytes]; the writer's chunks are 256 KiB (rosbag2's 768 KiB).
 MAX_CHUNK_BYTES = 64 * 2**20
+#: Largest ratio of a chunk's declared uncompressed size to its compressed size (above
+#: :data:`MIN_CHUNK_BOUND`): recorded messages compress 3-50x, a "zip bomb" 1000x and more.
+MAX_INFLATION = 1000
+MIN_CHUNK_BOUND = 2**20
 RECORD_HEADER_BYTES = 1 + 8  # opcode, length
 _CHUNK_FIXED = struct.Struct("<QQQI")  # start, end, uncompressed size, crc
 COMPRESSIONS = ("", "none", "zstd", "lz4")
@@ -102,10 +106,7 @@ def parse_chunk(body) -> Chunk:
         raise ChunkError(f"a chunk claims {data_length} data bytes, its record holds {len(body) - position}")
     if compression not in COMPRESSIONS:
         raise ChunkError(f"chunk compression {compression!r}; valid: {', '.join(c for c in COMPRESSIONS if c)}")
-    if uncompressed_size > MAX_CHUNK_BYTES:
-        raise ChunkError(
-            f"a chunk declares {uncompressed_size} uncompressed bytes; valid: at most {MAX_CHUNK_BYTES} (the cap)"
-        )
+    check_declared_size(uncompressed_size, len(body) - position)
     return Chunk(
         compression=compression,
         data=bytes(body[position:]),
@@ -116,6 +117,16 @@ def parse_chunk(body) -> Chunk:
     )
 
 
+def check_declared_size(declared: int, compressed: int) -> None:
+    """Refuse a chunk whose declared uncompressed size is beyond the caps."""
+    bound = min(MAX_CHUNK_BYTES, max(MIN_CHUNK_BOUND, MAX_INFLATION * compressed))
+    if declared > bound:
+        raise ChunkError(
+            f"a chunk of {compressed} bytes declares {declared} uncompressed bytes; valid: at most {bound} "
+            f"({MAX_INFLATION}x its size, {MAX_CHUNK_BYTES} in all)"
+        )
+
+
 def chunk_data(chunk: Chunk) -> bytes:
     """The uncompressed bytes of a chunk: at most its declared size, CRC checked when set.
 
@@ -123,8 +134,7 @@ def chunk_data(chunk: Chunk) -> bytes:
         ChunkError: more or fewer bytes than declared, a decoder error, a CRC mismatch.
     """
     declared = chunk.uncompressed_size
-    if declared > MAX_CHUNK_BYTES:
-        raise ChunkError(f"a chunk declares {declared} uncompressed bytes; valid: at most {MAX_CHUNK_BYTES}")
+    check_declared_size(declared, len(chunk.data))
     try:
         if chunk.compression == "zstd":
             # A bounded read: a frame header's own content size is not trusted either.
@@ -155,8 +165,9 @@ def chunk_records(chunk: Chunk) -> list[Schema | Channel | Message]:
     offset = 0
     while offset < len(data):
         opcode, body, offset = record_at(data, offset)
-        if opcode in PARSED_OPCODES:
-            records.append(parse_record(opcode, body))
+        if opcode not in PARSED_OPCODES:  # the only records a chunk may hold (MCAP spec)
+            raise ChunkError(f"a chunk holds a record of opcode 0x{opcode:02x}; valid: schema, channel, message")
+        records.append(parse_record(opcode, body))
     return records
 
 

@@ -179,7 +179,10 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iter
     for raw in iter_raw_messages(path, topics):
         cls = classes.get(raw.type)
         if cls is None:
-            cls = classes[raw.type] = _reader_for(raw.type)
+            try:
+                cls = classes[raw.type] = _reader_for(raw.type)
+            except MessageDefinitionError as error:
+                raise MessageDefinitionError(f"{path}: topic {raw.topic}: {error}") from None
         try:
             message = cls(raw.data) if cls is DecodedTfMessage.from_cdr else deserialize_message(raw.data, cls)
         except Exception as error:  # rclpy raises a bare RuntimeError-like _rclpy error
