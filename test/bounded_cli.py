@@ -68,8 +68,22 @@ def one_line_refusal_problem(result: dict, must_name: str) -> str | None:
     return None
 
 
-def run_bounded_script(script: str, out: Path, *args: str) -> dict:
-    """Run ``test/SCRIPT OUT ARGS`` (a fuzzer) and return the JSON it wrote to OUT."""
+class Outcomes(dict):
+    """A fuzzer's results by case; a case it never reached fails with why the process ended."""
+
+    died = ""
+
+    def __missing__(self, case: str):
+        raise AssertionError(f"no result for {case!r}: the bounded process ended before it ({self.died})")
+
+
+def save_progress(out: str | Path, results: dict) -> None:
+    """Write the results so far (a fuzzer killed by its limits still reports the cases it finished)."""
+    Path(out).write_text(json.dumps(results))
+
+
+def run_bounded_script(script: str, out: Path, *args: str) -> Outcomes:
+    """Run ``test/SCRIPT OUT ARGS`` (a fuzzer) and return the JSON it wrote to OUT, even a partial one."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(HERE), "MPLBACKEND": "Agg"}
     completed = subprocess.run(
         [sys.executable, str(HERE / script), str(out), *args],
@@ -78,5 +92,8 @@ def run_bounded_script(script: str, out: Path, *args: str) -> dict:
         text=True,
         timeout=CPU_SECONDS * 3,
     )
-    assert completed.returncode == 0, f"the bounded process died: {completed.stderr[-3000:]}"
-    return json.loads(out.read_text())
+    outcomes = Outcomes(json.loads(out.read_text()) if out.is_file() else {})
+    if completed.returncode != 0:
+        signal_name = signal.Signals(-completed.returncode).name if completed.returncode < 0 else ""
+        outcomes.died = f"exit {completed.returncode} {signal_name}: {completed.stderr[-2000:]}"
+    return outcomes

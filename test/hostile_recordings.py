@@ -20,7 +20,7 @@ import zlib
 from pathlib import Path
 
 import zstandard
-from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli
+from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli, save_progress
 
 SECRET = b"SECRET-BYTES-OUTSIDE-THE-BAG"
 HOSTILE_U64 = [2**64 - 1, 2**40, 2**63, 0, 1, 0xFFFFFFFF]
@@ -256,8 +256,9 @@ def main(out: str, examples: int) -> None:
             salvaged = Path(results[name]["salvage"]["args"][2])
             if results[name]["salvage"]["rc"] == 0:
                 results[name]["salvaged_count"] = read_info(salvaged).message_count
+            save_progress(out, results)
         results["hypothesis"] = {"problem": run_hypothesis(root, {"run.mcap": run, "plain.mcap": plain}, examples)}
-    Path(out).write_text(json.dumps(results))
+    save_progress(out, results)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli
+from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli, save_progress
 
 REPO = Path(__file__).resolve().parent.parent
 HOSTILE_NUMBERS = [
@@ -246,13 +246,14 @@ def main(out: str, examples: int) -> None:
     with tempfile.TemporaryDirectory() as directory:
         for case, (name, content) in CASES.items():
             results[case] = outcome(_write(Path(directory), name, content))
+            save_progress(out, results)
         # The same bytes behind a .urdf symlink to a name without a suffix: read as URDF.
         target = _write(Path(directory), "noext", _urdf(joint_inner='<origin xyz="0.25 0 0"/>'))
         link = Path(directory) / "arm.urdf"
         os.symlink(target, link)
         results["urdf_symlink"] = outcome(link)
         results["hypothesis"] = {"problem": run_hypothesis(Path(directory), examples)}
-    Path(out).write_text(json.dumps(results))
+    save_progress(out, results)
 
 
 if __name__ == "__main__":

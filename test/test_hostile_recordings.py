@@ -20,7 +20,6 @@ from hostile_recordings import chunk_offsets
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from manip_kin.plotting import load_run, plotted_topics
 from manip_kin.recording import RecordingWriter
 from manip_kin.recording.messages import message_class
 
@@ -120,6 +119,8 @@ def _commands_on_a_ros2_control_topic(path: Path, topic: str) -> None:
 
 
 def test_plot_finds_the_commands_by_type_on_a_remapped_topic(tmp_path):
+    from manip_kin.plotting import load_run
+
     path = tmp_path / "remapped.mcap"
     _commands_on_a_ros2_control_topic(path, "/forward_velocity_controller/commands")
     run = load_run(path)
@@ -129,6 +130,8 @@ def test_plot_finds_the_commands_by_type_on_a_remapped_topic(tmp_path):
 
 
 def test_a_type_is_looked_up_only_when_one_topic_has_it_and_poses_only_by_name():
+    from manip_kin.plotting import plotted_topics
+
     two = {"/a/commands": "std_msgs/msg/Float64MultiArray", "/b/commands": "std_msgs/msg/Float64MultiArray"}
     assert plotted_topics(two) == {}
     poses = {"/my_tool": "geometry_msgs/msg/PoseStamped", "/joint_states": "sensor_msgs/msg/JointState"}
