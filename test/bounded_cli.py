@@ -84,7 +84,8 @@ def save_progress(out: str | Path, results: dict) -> None:
 
 def run_bounded_script(script: str, out: Path, *args: str) -> Outcomes:
     """Run ``test/SCRIPT OUT ARGS`` (a fuzzer) and return the JSON it wrote to OUT, even a partial one."""
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(HERE), "MPLBACKEND": "Agg"}
+    path = os.pathsep.join(p for p in (str(HERE), os.environ.get("PYTHONPATH", "")) if p)
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": path, "MPLBACKEND": "Agg"}
     completed = subprocess.run(
         [sys.executable, str(HERE / script), str(out), *args],
         env=env,

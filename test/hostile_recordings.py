@@ -167,7 +167,7 @@ def run_all(path: Path, out_dir: Path) -> dict[str, dict]:
 
 
 def _problem(command: str, result: dict, path: Path) -> str | None:
-    if SECRET.decode() in result["stdout"] + result["stderr"]:
+    if SECRET[:6].decode() in result["stdout"] + result["stderr"]:  # even the first bytes
         return "bytes of a file outside the bag were printed"
     if "Zen of Python" in result["stdout"] + result["stderr"] or "this" in sys.modules:
         return "a module named by the recording was imported"
