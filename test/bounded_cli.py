@@ -82,6 +82,15 @@ def save_progress(out: str | Path, results: dict) -> None:
     Path(out).write_text(json.dumps(results))
 
 
+def first_failure(check) -> str | None:
+    """Run a hypothesis test function; its failure (the falsifying example) as text, or None."""
+    try:
+        check()
+    except AssertionError as error:
+        return str(error)[:3000]
+    return None
+
+
 def run_bounded_script(script: str, out: Path, *args: str) -> Outcomes:
     """Run ``test/SCRIPT OUT ARGS`` (a fuzzer) and return the JSON it wrote to OUT, even a partial one."""
     path = os.pathsep.join(p for p in (str(HERE), os.environ.get("PYTHONPATH", "")) if p)

@@ -20,7 +20,7 @@ import zlib
 from pathlib import Path
 
 import zstandard
-from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli, save_progress
+from bounded_cli import first_failure, limit_this_process, one_line_refusal_problem, run_cli, save_progress
 
 SECRET = b"SECRET-BYTES-OUTSIDE-THE-BAG"
 HOSTILE_U64 = [2**64 - 1, 2**40, 2**63, 0, 1, 0xFFFFFFFF]
@@ -229,11 +229,7 @@ def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | N
         for command, result in run_all(path, root).items():
             assert result["problem"] is None, f"{command} of {name} mutated: {result['problem']}"
 
-    try:
-        check()
-    except AssertionError as error:
-        return str(error)[:3000]
-    return None
+    return first_failure(check)
 
 
 def main(out: str, examples: int) -> None:

@@ -24,7 +24,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bounded_cli import limit_this_process, one_line_refusal_problem, run_cli, save_progress
+from bounded_cli import first_failure, limit_this_process, one_line_refusal_problem, run_cli, save_progress
 
 REPO = Path(__file__).resolve().parent.parent
 HOSTILE_NUMBERS = [
@@ -233,11 +233,7 @@ def run_hypothesis(directory: Path, examples: int) -> str | None:
         problem = problem_with(outcome(_write(directory, name, content)))
         assert problem is None, f"{name} mutated to {content[:300]!r}: {problem}"
 
-    try:
-        check()
-    except AssertionError as error:
-        return str(error)[:3000]
-    return None
+    return first_failure(check)
 
 
 def main(out: str, examples: int) -> None:
