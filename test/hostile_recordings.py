@@ -186,6 +186,9 @@ def _problem(command: str, result: dict, path: Path) -> str | None:
     return one_line_refusal_problem(result, str(path))
 
 
+METADATA = "metadata.yaml"
+
+
 def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | None:
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
@@ -196,7 +199,10 @@ def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | N
     from manip_kin.plotting import tracking_errors
 
     plot_commands.plot_run = lambda run, out_dir, title="": [tracking_errors(run)] and []
+    bag = bases.pop("bag")  # a bag directory the writer made: its metadata.yaml is mutated
+    mcap_name, bag_mcap = next((f.name, f.read_bytes()) for f in bag.glob("*.mcap"))
     contents = {name: path.read_bytes() for name, path in bases.items()}
+    contents[METADATA] = (bag / METADATA).read_bytes()
     counter = iter(range(10**9))
 
     @st.composite
@@ -225,7 +231,12 @@ def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | N
     def check(named):
         name, data = named
         path = root / f"mutated_{next(counter):04d}_{name}"
-        path.write_bytes(data)
+        if name == METADATA:  # a bag directory: the writer's file, its metadata.yaml mutated
+            path.mkdir()
+            (path / mcap_name).write_bytes(bag_mcap)
+            (path / METADATA).write_bytes(data)
+        else:
+            path.write_bytes(data)
         for command, result in run_all(path, root).items():
             assert result["problem"] is None, f"{command} of {name} mutated: {result['problem']}"
 
@@ -246,6 +257,9 @@ def main(out: str, examples: int) -> None:
         write_recording(run, chunk_size=1024)
         plain = root / "plain.mcap"
         write_recording(plain, compression="none", chunk_size=1024)
+        lz4 = root / "lz4.mcap"
+        write_recording(lz4, compression="lz4", chunk_size=1024)
+        write_recording(root / "bag", chunk_size=1024)
         results["chunk_count"] = len(chunk_offsets(run.read_bytes()))
         for name, path in cases(root, run).items():
             results[name] = run_all(path, root)
@@ -253,7 +267,11 @@ def main(out: str, examples: int) -> None:
             if results[name]["salvage"]["rc"] == 0:
                 results[name]["salvaged_count"] = read_info(salvaged).message_count
             save_progress(out, results)
-        results["hypothesis"] = {"problem": run_hypothesis(root, {"run.mcap": run, "plain.mcap": plain}, examples)}
+        results["hypothesis"] = {
+            "problem": run_hypothesis(
+                root, {"run.mcap": run, "plain.mcap": plain, "lz4.mcap": lz4, "bag": root / "bag"}, examples
+            )
+        }
     save_progress(out, results)
 
 
