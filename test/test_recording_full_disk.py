@@ -15,7 +15,7 @@ import pytest
 import rclpy
 from sensor_msgs.msg import JointState
 
-from manip_kin.recording import RecordingWriter, read_messages, salvage
+from manip_kin.recording import RecordingWriter, read_info, read_messages, salvage
 from manip_kin.recording.write_failure import RecordingWriteError
 
 RECORDER = Path(sysconfig.get_path("scripts")) / "recorder"
@@ -64,6 +64,9 @@ def test_writer_on_a_full_disk_raises_once_and_keeps_every_flushed_message(small
     assert recovered == [0.001 * i for i in range(summary.message_count)]
     assert report.message_count == summary.message_count
     assert ended == ("ended after them" in str(raised.value))
+    if ended:  # a file ended without its summary reads directly too (scanned record by record)
+        assert read_info(path).message_count == summary.message_count
+        assert [m.message.position[0] for m in read_messages(path)] == recovered
 
 
 def test_recorder_on_a_full_disk_one_error_line_exit_1_and_a_salvageable_file(small_disk, tmp_path):
@@ -100,3 +103,6 @@ def test_recorder_on_a_full_disk_one_error_line_exit_1_and_a_salvageable_file(sm
     assert len(errors) == 1 and "No space left on device" in errors[0], stderr[-2000:]
     report = salvage(output, tmp_path / "saved.mcap")
     assert report.message_count > 0 and report.topic_counts.get("/joint_states", 0) == report.message_count
+    # The reserve made room for the ending: the file reads as it is, and the reserve is gone.
+    assert output.read_bytes().endswith(MAGIC) and read_info(output).message_count == report.message_count
+    assert list(small_disk.iterdir()) == [output]

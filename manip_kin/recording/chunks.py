@@ -37,6 +37,7 @@ MIN_CHUNK_BOUND = 2**20
 RECORD_HEADER_BYTES = 1 + 8  # opcode, length
 _CHUNK_FIXED = struct.Struct("<QQQI")  # start, end, uncompressed size, crc
 COMPRESSIONS = ("", "none", "zstd", "lz4")
+MAGIC = b"\x89MCAP0\r\n"
 
 
 class ChunkError(CorruptRecordingError):
@@ -191,3 +192,35 @@ def parse_record(opcode: int, body) -> Schema | Channel | Message:
             raise
         raise ChunkError(f"a record of opcode {opcode} does not parse ({type(error).__name__})") from None
     raise ChunkError(f"opcode {opcode} is not a schema, channel or message")
+
+
+def top_level_records(opcode: int, body) -> list[Schema | Channel | Message]:
+    """The schema, channel and message records a top-level record holds (a chunk's, or itself)."""
+    if opcode == Opcode.CHUNK:
+        return chunk_records(parse_chunk(body))
+    if opcode in PARSED_OPCODES:
+        return [parse_record(opcode, body)]
+    if opcode not in KNOWN_OPCODES:
+        raise ChunkError(f"opcode 0x{opcode:02x} is no MCAP record")
+    return []
+
+
+KNOWN_OPCODES = frozenset(int(opcode) for opcode in Opcode)
+
+
+def walk(data) -> Iterator[tuple[int, int, memoryview | bytes, list[Schema | Channel | Message]]]:
+    """``(offset, opcode, body, records)`` of every top-level record up to the footer, strictly.
+
+    For a file without a summary section (a recording ended on a full disk): readers scan it.
+
+    Raises:
+        ChunkError: at the first record that is cut off or damaged.
+    """
+    offset = len(MAGIC)
+    while offset < len(data):
+        opcode, body, next_offset = record_at(data, offset)
+        yield offset, opcode, body, top_level_records(opcode, body)
+        if opcode == Opcode.FOOTER:
+            return
+        offset = next_offset
+    raise ChunkError("the file ends before its footer")

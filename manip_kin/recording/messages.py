@@ -24,7 +24,7 @@ from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
-from manip_kin.recording.chunks import ChunkError, chunk_records, mapped, parse_chunk, record_at
+from manip_kin.recording.chunks import ChunkError, chunk_records, mapped, parse_chunk, record_at, walk
 from manip_kin.recording.errors import CorruptRecordingError, MessageDefinitionError
 from manip_kin.recording.files import DECODE_ERRORS, check_complete, recording_files, salvage_hint
 from manip_kin.recording.msgdef import find_interface_file, normalize_type_name
@@ -79,13 +79,40 @@ def iter_raw_messages(
                 ) from None
 
 
+class _Messages:
+    """Turns records into RawMessages: remembers schemas and channels, keeps the wanted topics."""
+
+    def __init__(self, schemas: dict, channels: dict, wanted: set[str] | None, earliest: int):
+        self.schemas, self.channels, self.wanted, self.earliest = schemas, channels, wanted, earliest
+
+    def take(self, records: list) -> Iterator[RawMessage]:
+        for record in records:
+            if isinstance(record, Schema):
+                self.schemas.setdefault(record.id, record)
+            elif isinstance(record, Channel):
+                self.channels.setdefault(record.id, record)
+            elif record.log_time >= self.earliest:
+                channel = self.channels.get(record.channel_id)
+                if channel is None or (self.wanted is not None and channel.topic not in self.wanted):
+                    continue
+                schema = self.schemas.get(channel.schema_id)
+                name = schema.name if schema is not None else ""
+                yield RawMessage(channel.topic, name, record.data, record.log_time, record.publish_time)
+
+
 def _file_messages(data, wanted: set[str] | None, start_ns: int | None) -> Iterator[RawMessage]:
-    """The messages of one mapped file in log-time order, merged across chunks by their index."""
+    """The messages of one mapped file in log-time order, merged across chunks by their index.
+
+    A file without a summary section (ended on a full disk) is read in one pass and sorted.
+    """
     summary = SeekingReader(data, record_size_limit=len(data)).get_summary()
-    if summary is None or not summary.chunk_indexes:
-        raise ChunkError("it has no chunk index (not written as a chunked recording)")
-    schemas, channels = dict(summary.schemas), dict(summary.channels)
     earliest = start_ns if start_ns is not None else -1
+    if summary is None or not summary.chunk_indexes:
+        decode = _Messages({}, {}, wanted, earliest)
+        found = [raw for _, _, _, records in walk(data) for raw in decode.take(records)]
+        yield from sorted(found, key=lambda raw: raw.log_time_ns)  # stable: file order within a time
+        return
+    decode = _Messages(dict(summary.schemas), dict(summary.channels), wanted, earliest)
     indexes = sorted(
         (index for index in summary.chunk_indexes if index.message_end_time >= earliest),
         key=lambda index: (index.message_start_time, index.chunk_start_offset),
@@ -98,24 +125,8 @@ def _file_messages(data, wanted: set[str] | None, start_ns: int | None) -> Itera
         opcode, body, _ = record_at(data, index.chunk_start_offset)
         if opcode != Opcode.CHUNK:
             raise ChunkError(f"the chunk index points at byte {index.chunk_start_offset}, which is no chunk")
-        for record in chunk_records(parse_chunk(body)):
-            if isinstance(record, Schema):
-                schemas.setdefault(record.id, record)
-            elif isinstance(record, Channel):
-                channels.setdefault(record.id, record)
-            elif record.log_time >= earliest:
-                channel = channels.get(record.channel_id)
-                if channel is None or (wanted is not None and channel.topic not in wanted):
-                    continue
-                schema = schemas.get(channel.schema_id)
-                raw = RawMessage(
-                    channel.topic,
-                    schema.name if schema is not None else "",
-                    record.data,
-                    record.log_time,
-                    record.publish_time,
-                )
-                heapq.heappush(pending, (record.log_time, next(order), raw))
+        for raw in decode.take(chunk_records(parse_chunk(body))):
+            heapq.heappush(pending, (raw.log_time_ns, next(order), raw))
     while pending:
         yield heapq.heappop(pending)[2]
 

@@ -11,15 +11,7 @@ from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
 
-from manip_kin.recording.chunks import (
-    PARSED_OPCODES,
-    ChunkError,
-    chunk_records,
-    mapped,
-    parse_chunk,
-    parse_record,
-    record_at,
-)
+from manip_kin.recording.chunks import chunk_records, mapped, parse_chunk, record_at, top_level_records
 from manip_kin.recording.errors import CorruptRecordingError, RecordingError
 from manip_kin.recording.files import DECODE_ERRORS, MCAP_MAGIC, recording_files
 from manip_kin.recording.qos import parse_profiles
@@ -156,7 +148,7 @@ def _salvage_file(path: Path, writer: Any, report: SalvageReport) -> None:
         while offset < len(data) and not reached_footer:
             try:
                 opcode, body, next_offset = record_at(data, offset)
-                records = _top_level_records(opcode, body)
+                records = top_level_records(opcode, body)
             except DECODE_ERRORS as error:
                 detail = f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
                 resume = next_valid_chunk(data, offset + 1)
@@ -180,20 +172,6 @@ def _salvage_file(path: Path, writer: Any, report: SalvageReport) -> None:
         first = f"cut off or damaged record ({damaged[0]})" if damaged else "end of file before the footer"
         more = f"; {len(damaged) - 1} more damaged regions skipped" if len(damaged) > 1 else ""
         report.stop_reason = report.stop_reason or first + more
-
-
-def _top_level_records(opcode: int, body) -> list:
-    """The schema, channel and message records a top-level record holds (a chunk's, or itself)."""
-    if opcode == Opcode.CHUNK:
-        return chunk_records(parse_chunk(body))
-    if opcode in PARSED_OPCODES:
-        return [parse_record(opcode, body)]
-    if opcode not in _KNOWN_OPCODES:
-        raise ChunkError(f"opcode 0x{opcode:02x} is no MCAP record")
-    return []
-
-
-_KNOWN_OPCODES = frozenset(int(opcode) for opcode in Opcode)
 
 
 def next_valid_chunk(data, start: int) -> int | None:

@@ -13,7 +13,6 @@ file complete (and the ``rosbag2`` metadata record and ``metadata.yaml``).
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +35,7 @@ from manip_kin.recording.msgdef import (
 from manip_kin.recording.output_layout import OutputLayout, resolve_output
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.summary import RecordingSummary, format_bytes
-from manip_kin.recording.write_failure import RecordingWriteError, WholeWrites, end_at_last_flush
+from manip_kin.recording.write_failure import DiskGuard, RecordingWriteError
 
 # Names other modules import from here.
 __all__ = [
@@ -117,15 +116,14 @@ class RecordingWriter:
         self.layout = resolve_output(output, overwrite=overwrite)
         self.compression = compression
         self._flush_interval_s = flush_interval_s
-        self._file = WholeWrites(self.layout.mcap_path)
-        self._failure: RecordingWriteError | None = None
-        self._flushed_messages = 0
+        self._disk = DiskGuard(self.layout.mcap_path)
+        self._file = self._disk.stream
         self._mcap = McapWriter(
             self._file,
             chunk_size=chunk_size,
             compression=_COMPRESSIONS[compression],
         )
-        with self._failing_disk():
+        with self._disk.guard():
             self._mcap.start(profile=MCAP_PROFILE, library=f"manip_kin {__version__}; mcap-python")
             self._file.flush()
         self._schemas: dict[str, int] = {}
@@ -236,8 +234,8 @@ class RecordingWriter:
             raise RecordingError(f"topic {topic!r} is not registered; registered: {', '.join(self._topics) or 'none'}")
         if self._summary is not None:
             raise RecordingError(f"recording {self.layout.mcap_path} is closed")
-        if self._failure is not None:
-            raise self._failure
+        if self._disk.failure is not None:
+            raise self._disk.failure
         if publish_time_ns is None:
             stamp = header_stamp_ns(data) if entry.header_first else None
             if stamp is not None:
@@ -246,7 +244,7 @@ class RecordingWriter:
                 publish_time_ns = source_time_ns if source_time_ns else log_time_ns
         entry.sequence += 1
         written_before = self._file.flushed_end
-        with self._failing_disk():
+        with self._disk.guard(kept_if_written=self._message_count + 1):
             self._mcap.add_message(
                 channel_id=entry.channel_id,
                 log_time=log_time_ns,
@@ -262,7 +260,7 @@ class RecordingWriter:
             self._end_ns = max(self._end_ns, log_time_ns)
         self._message_count += 1
         if self._file.flushed_end != written_before:  # a full chunk, this message included, went out
-            self._flushed_messages = self._message_count
+            self._disk.kept_messages = self._message_count
         self._message_bytes += len(data)
         self._pending = True
         self.flush_if_due()
@@ -306,11 +304,10 @@ class RecordingWriter:
 
     def flush(self) -> None:
         """Finish the current chunk and hand everything written so far to the OS."""
-        if self._summary is None and self._failure is None:
-            with self._failing_disk():
+        if self._summary is None and self._disk.failure is None:
+            with self._disk.guard(kept_if_written=self._message_count):
                 self._mcap.flush()
-                self._file.flush()
-            self._flushed_messages = self._message_count
+            self._disk.kept_messages = self._message_count
             self._pending = False
             self._last_flush = time.monotonic()
 
@@ -351,12 +348,12 @@ class RecordingWriter:
         """
         if self._summary is not None:
             return self._summary
-        if self._failure is not None:
+        if self._disk.failure is not None:
             return self._kept_summary()
         try:
             return self._complete()
         except OSError as error:
-            failure = self._fail(error)
+            failure = self._disk.fail(error)
             self._kept_summary()
             raise failure from None
 
@@ -375,45 +372,26 @@ class RecordingWriter:
         )
         self._mcap.finish()
         self._file.close()
-        self._flushed_messages = self._message_count
+        self._disk.kept_messages = self._message_count
         if self.layout.bag_directory is not None:
             try:
                 (self.layout.bag_directory / bag_metadata.METADATA_FILENAME).write_text(
                     bag_metadata.metadata_yaml(metadata), encoding="utf-8"
                 )
             except OSError as error:  # the .mcap is complete: readers find it without metadata.yaml
-                self._failure = RecordingWriteError(
+                self._disk.failure = RecordingWriteError(
                     f"writing {self.layout.bag_directory / bag_metadata.METADATA_FILENAME} failed: "
                     f"{error.strerror or error}; {self.layout.mcap_path} is complete"
                 )
-                raise self._failure from None
+                raise self._disk.failure from None
         return self._kept_summary()
 
     # -- a failing disk ------------------------------------------------------------------------
 
-    @contextlib.contextmanager
-    def _failing_disk(self):
-        """Turn an OSError of the disk into one :class:`RecordingWriteError` (the file ended first)."""
-        try:
-            yield
-        except OSError as error:
-            raise self._fail(error) from None
-
-    def _fail(self, error: OSError) -> RecordingWriteError:
-        if self._failure is None:
-            ended = end_at_last_flush(self._file)
-            kept = "ended after them" if ended else "cut after them (no room left to end it)"
-            self._failure = RecordingWriteError(
-                f"writing {self.layout.mcap_path} failed: {error.strerror or error}; the {self._flushed_messages} "
-                f"messages flushed before are kept, the file {kept}; `manip_kin info --salvage OUT "
-                f"{self.layout.mcap_path}` makes it a complete recording"
-            )
-        return self._failure
-
     @property
     def failure(self) -> RecordingWriteError | None:
         """The disk failure that ended the recording, or None."""
-        return self._failure
+        return self._disk.failure
 
     def _kept_summary(self) -> RecordingSummary:
         """The summary of what the file keeps: every message once complete, the flushed ones after a failure."""
@@ -421,7 +399,7 @@ class RecordingWriter:
             path=self.layout.bag_directory or self.layout.mcap_path,
             mcap_path=self.layout.mcap_path,
             topic_counts={t.name: t.message_count for t in self._topics.values()},
-            message_count=self._flushed_messages,
+            message_count=self._disk.kept_messages,
             message_bytes=self._message_bytes,
             file_bytes=self.layout.mcap_path.stat().st_size if self.layout.mcap_path.exists() else 0,
             start_ns=self._start_ns,
