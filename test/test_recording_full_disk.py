@@ -54,7 +54,8 @@ def test_writer_on_a_full_disk_raises_once_and_keeps_every_flushed_message(small
             written += 1
     assert "messages flushed before are kept" in str(raised.value) and "--salvage" in str(raised.value)
     summary = writer.close()  # no second error: the failure was raised once
-    assert writer.failure is raised.value and 0 < summary.message_count <= written
+    # The failing write's own message is kept when its chunk got out before the write that failed.
+    assert writer.failure is raised.value and 0 < summary.message_count <= written + 1
     data = path.read_bytes()
     assert data.startswith(MAGIC)
     ended = data.endswith(MAGIC)
@@ -106,3 +107,19 @@ def test_recorder_on_a_full_disk_one_error_line_exit_1_and_a_salvageable_file(sm
     # The reserve made room for the ending: the file reads as it is, and the reserve is gone.
     assert output.read_bytes().endswith(MAGIC) and read_info(output).message_count == report.message_count
     assert list(small_disk.iterdir()) == [output]
+
+
+def test_the_reserve_makes_room_for_the_ending_on_a_disk_filled_to_the_last_block(small_disk):
+    from manip_kin.recording.write_failure import ENDING, WholeWrites, end_at_last_flush
+
+    stream = WholeWrites(small_disk / "r.mcap")
+    stream.write(MAGIC + b"r" * (4096 - len(MAGIC)))  # ends on a page boundary: the ending needs a new page
+    with open(small_disk / "filler", "wb", buffering=0) as filler:  # whatever else fills the disk
+        with pytest.raises(OSError):
+            while True:
+                filler.write(b"f" * 4096)
+    with pytest.raises(OSError):
+        stream.write(b"x" * 8192)
+    assert end_at_last_flush(stream)
+    assert (small_disk / "r.mcap").read_bytes() == MAGIC + b"r" * (4096 - len(MAGIC)) + ENDING
+    assert not any(path.name.endswith(".reserve") for path in small_disk.iterdir())
