@@ -64,7 +64,7 @@ class UnknownRobotError(InputError):
         self.available = tuple(available)
         super().__init__(
             f"unknown robot {name!r}: not a bundled robot ({', '.join(self.available)}) "
-            "nor an existing .yaml/.urdf file"
+            "nor an existing robot file (a robot YAML or a URDF, told apart by content)"
         )
 
 
