@@ -10,6 +10,7 @@ matplotlib (Agg; GIF through Pillow, MP4 through ffmpeg).
 from __future__ import annotations
 
 import shutil
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.figure_axes import equal_3d_axes
-from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, decode_tf_message
+from manip_kin.recording.tf_message import TF_MESSAGE_TYPE, TF_STATIC_TOPIC, TF_TOPIC, decode_tf_message
 from manip_kin.tf_tree import LinkTransform, compose
 
 ANIMATION_FORMATS = ("gif", "mp4")
@@ -32,11 +33,8 @@ def iter_tf_poses(path: str | Path, root: str | None = None) -> Iterator[tuple[i
         root: frame to compose from; default: the parent that is nobody's child
             (``base_link`` for manip_kin's robots).
     """
-    from manip_kin.recording.messages import iter_raw_messages
-
     latest: dict[str, LinkTransform] = {}
-    for raw in iter_raw_messages(path, topics=[TF_TOPIC, TF_STATIC_TOPIC]):
-        decoded = decode_tf_message(raw.data)
+    for raw, decoded in _tf_messages(path, [TF_TOPIC, TF_STATIC_TOPIC]):
         for _, transform in decoded:
             latest[transform.child] = transform
         if raw.topic != TF_TOPIC or not decoded:
@@ -46,6 +44,29 @@ def iter_tf_poses(path: str | Path, root: str | None = None) -> Iterator[tuple[i
             parents = {t.parent for t in latest.values()} - set(latest)
             start = sorted(parents)[0] if parents else decoded[0][1].parent
         yield decoded[0][0], raw.log_time_ns, compose(latest.values(), start)
+
+
+def _tf_messages(path: str | Path, topics: list[str]) -> Iterator[tuple[object, list]]:
+    """``(raw message, decoded transforms)`` of the TFMessage topics among ``topics``.
+
+    Raises:
+        CorruptRecordingError: a message that is not a TFMessage in CDR.
+    """
+    from manip_kin.recording.errors import CorruptRecordingError
+    from manip_kin.recording.messages import iter_raw_messages
+    from manip_kin.recording.msgdef import normalize_type_name
+
+    for raw in iter_raw_messages(path, topics=topics):
+        try:
+            if normalize_type_name(raw.type) != TF_MESSAGE_TYPE:
+                continue  # a /tf of another type is not TF
+            decoded = decode_tf_message(raw.data)
+        except (ValueError, struct.error, IndexError, OverflowError) as error:
+            raise CorruptRecordingError(
+                f"{path}: the {raw.type or 'untyped'} message on {raw.topic} at {raw.log_time_ns} ns is no "
+                f"TFMessage ({type(error).__name__}: {str(error)[:80]})"
+            ) from None
+        yield raw, decoded
 
 
 @dataclass(frozen=True)
@@ -69,14 +90,12 @@ class ArmFrames:
 
 def load_arm_frames(path: str | Path) -> ArmFrames | None:
     """Every ``/tf`` instant of a recording as arrays; None when it has no ``/tf``."""
-    from manip_kin.recording.messages import iter_raw_messages
-
     samples = list(iter_tf_poses(path))
     if not samples:
         return None
     parent_of: dict[str, str] = {}
-    for raw in iter_raw_messages(path, topics=[TF_STATIC_TOPIC, TF_TOPIC]):
-        for _, transform in decode_tf_message(raw.data):
+    for raw, decoded in _tf_messages(path, [TF_STATIC_TOPIC, TF_TOPIC]):
+        for _, transform in decoded:
             parent_of.setdefault(transform.child, transform.parent)
         if raw.topic == TF_TOPIC:
             break  # the first /tf message names every moving frame

@@ -37,6 +37,25 @@ def exit_code_for(error: BaseException) -> int:
     return EXIT_INPUT_ERROR if isinstance(error, InputError) else EXIT_FAILURE
 
 
+#: Characters of a received value an error message quotes at most.
+QUOTE_LIMIT = 80
+
+
+def bounded_repr(value: object, limit: int = QUOTE_LIMIT) -> str:
+    """``repr(value)`` cut to about ``limit`` characters (``...`` and the full length when cut).
+
+    Refusals quote what they received; a 100k-element array or a huge string must not
+    become a 500 kB log line.
+    """
+    if isinstance(value, (list, tuple, dict, set)) and len(value) > limit:
+        text = f"{type(value).__name__} of {len(value)} items"
+        return text
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[: limit - 3]}... ({len(text)} characters)"
+
+
 class UnknownRobotError(InputError):
     """A robot name that is neither bundled nor an existing file."""
 
@@ -45,7 +64,7 @@ class UnknownRobotError(InputError):
         self.available = tuple(available)
         super().__init__(
             f"unknown robot {name!r}: not a bundled robot ({', '.join(self.available)}) "
-            "nor an existing .yaml/.urdf file"
+            "nor an existing robot file (a robot YAML or a URDF, told apart by content)"
         )
 
 

@@ -3,7 +3,8 @@
 Arms with a closed form (:mod:`manip_kin.closed_form`) list all its branches, each revolute
 joint wrapped into its limits with every in-limit wrap listed, each verified by forward
 kinematics; a branch that misses the tolerances (a model only nearly of the structure) is
-refined by the iteration and kept when that converges. Other arms run the iterative solver
+refined by the iteration and kept when that converges. :func:`group_wraps` folds the wraps
+(solutions differing only by whole turns of revolute joints) into one solution each. Other arms run the iterative solver
 from ``q0`` and then from seeded random starts until ``restarts`` or ``time_budget`` is used
 up, and list the distinct solutions found (a redundant arm has infinitely many: the list is a
 sample, not the set).
@@ -11,6 +12,7 @@ sample, not the set).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -24,6 +26,7 @@ from manip_kin.closed_form import (
     solver_for_task,
     task_error_function,
 )
+from manip_kin.closed_form.geometry import wrap_to_pi
 from manip_kin.errors import InvalidArgumentError, NonFiniteError
 from manip_kin.ik import solve_ik
 from manip_kin.model import RobotModel
@@ -33,6 +36,49 @@ from manip_kin.tasks import Task, parse_task
 SOLVERS = ("auto", "closed_form", "numeric")
 # Numeric solutions closer than this in every joint are the same solution [rad | m].
 NUMERIC_DISTINCT = 1e-4
+
+
+@dataclass(frozen=True)
+class WrapGroup:
+    """One distinct IK solution and its other in-limit wraps.
+
+    Attributes:
+        solution: the member with the fewest whole turns of its revolute joints.
+        wraps: the other members, equal to ``solution`` up to whole turns (±2πk) of
+            revolute joints; sorted by turns, then branch.
+    """
+
+    solution: Solution
+    wraps: tuple[Solution, ...]
+
+
+def _turns(q: np.ndarray, revolute: np.ndarray) -> int:
+    return int(sum(abs(round((v - wrap_to_pi(v)) / (2 * math.pi))) for v in q[revolute]))
+
+
+def group_wraps(model: RobotModel, solutions: list[Solution], tolerance: float = NUMERIC_DISTINCT) -> list[WrapGroup]:
+    """``solutions`` grouped into distinct solutions: members differ only by whole turns of revolute joints.
+
+    Two solutions are one when every prismatic joint agrees and every revolute joint agrees
+    modulo 2π, within ``tolerance`` [rad | m]. Groups keep the order of their first member.
+    """
+    revolute = ~np.asarray(model.is_prismatic, dtype=bool)
+    groups: list[tuple[np.ndarray, list[Solution]]] = []
+    for solution in solutions:
+        for representative, members in groups:
+            difference = np.abs(solution.q - representative)
+            turned = np.mod(difference[revolute], 2 * math.pi)
+            difference[revolute] = np.minimum(turned, 2 * math.pi - turned)
+            if float(np.max(difference, initial=0.0)) <= tolerance:
+                members.append(solution)
+                break
+        else:
+            groups.append((solution.q, [solution]))
+    result = []
+    for _, members in groups:
+        members.sort(key=lambda s: (_turns(s.q, revolute), s.branch))
+        result.append(WrapGroup(members[0], tuple(members[1:])))
+    return result
 
 
 @dataclass(frozen=True)

@@ -44,10 +44,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from manip_kin.errors import ModelFileError, NotARotationError
+from manip_kin.errors import ModelFileError, NotARotationError, bounded_repr
 from manip_kin.model import Joint, JointType, RobotModel
+from manip_kin.robot_files import MAX_MAGNITUDE, parse_yaml, read_robot_file, robot_file_kind
 from manip_kin.rotations import (
     check_rotation,
     make_transform,
@@ -68,7 +68,12 @@ _DEGREES = re.compile(r"^\s*(?P<value>[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?)\s
 
 
 class _Reader:
-    """Reads typed values out of parsed YAML, naming the file and field on any mistake."""
+    """Reads typed values out of parsed YAML, naming the file and field on any mistake.
+
+    Numbers of geometry (lengths after ``scale``, angles, axis and screw components) must be
+    finite and at most :data:`~manip_kin.robot_files.MAX_MAGNITUDE`; limits may be ``inf``
+    (no limit), and a limit beyond that magnitude means no limit, as URDFs write ±1e16.
+    """
 
     def __init__(self, source: str, scale: float = 1.0):
         self.source = source
@@ -77,17 +82,31 @@ class _Reader:
     def fail(self, field: str, problem: str) -> ModelFileError:
         return ModelFileError(self.source, field, problem)
 
-    def scalar(self, value: Any, field: str) -> float:
+    def scalar(self, value: Any, field: str, limit: bool = False) -> float:
+        """A number; ``limit``: ±inf allowed, and a magnitude beyond the cap read as ±inf."""
         if isinstance(value, bool):
             raise self.fail(field, f"{value!r} is not a number")
         if isinstance(value, (int, float)):
-            number = float(value)
+            try:
+                number = float(value)
+            except OverflowError:
+                number = math.inf if value > 0 else -math.inf
         elif isinstance(value, str):
             number = self._parse_expression(value, field)
         else:
-            raise self.fail(field, f"{value!r} is not a number (valid: 0.5, pi/2, 165 deg)")
+            raise self.fail(field, f"{bounded_repr(value)} is not a number (valid: 0.5, pi/2, 165 deg)")
         if math.isnan(number):
             raise self.fail(field, "NaN is not a valid value")
+        if limit:
+            return number if abs(number) <= MAX_MAGNITUDE else math.copysign(math.inf, number)
+        return self.bounded(number, field)
+
+    def bounded(self, number: float, field: str) -> float:
+        """``number`` unless it is infinite or larger in magnitude than the cap."""
+        if not abs(number) <= MAX_MAGNITUDE:
+            raise self.fail(
+                field, f"{number:g} is out of range; valid: finite, |value| <= {MAX_MAGNITUDE:g} (m, rad, axis)"
+            )
         return number
 
     def _parse_expression(self, text: str, field: str) -> float:
@@ -100,20 +119,28 @@ class _Reader:
         if match:
             coefficient = float(match["coef"]) if match["coef"] else 1.0
             denominator = float(match["den"]) if match["den"] else 1.0
+            if denominator == 0:
+                raise self.fail(field, f"{bounded_repr(text)} divides by zero; valid: pi/N with N > 0")
             sign = -1.0 if match["sign"] == "-" else 1.0
             return sign * coefficient * math.pi / denominator
         match = _DEGREES.match(lowered)
         if match:
             return math.radians(float(match["value"]))
-        raise self.fail(field, f"{text!r} is not a number (valid: 0.5, pi/2, -3*pi/4, 165 deg)")
+        raise self.fail(field, f"{bounded_repr(text)} is not a number (valid: 0.5, pi/2, -3*pi/4, 165 deg)")
 
     def vector(self, value: Any, field: str, length: int) -> np.ndarray:
         if not isinstance(value, (list, tuple)) or len(value) != length:
-            raise self.fail(field, f"{value!r} is not a list of {length} numbers")
+            raise self.fail(field, f"{bounded_repr(value)} is not a list of {length} numbers")
         return np.array([self.scalar(v, f"{field}[{i}]") for i, v in enumerate(value)])
 
     def length_vector(self, value: Any, field: str) -> np.ndarray:
-        return self.vector(value, field, 3) * self.scale
+        lengths = self.vector(value, field, 3) * self.scale
+        for i, length in enumerate(lengths):
+            self.bounded(float(length), f"{field}[{i}]")
+        return lengths
+
+    def length(self, value: Any, field: str) -> float:
+        return self.bounded(self.scalar(value, field) * self.scale, field)
 
     def mapping(self, value: Any, field: str) -> dict:
         if not isinstance(value, dict):
@@ -122,7 +149,7 @@ class _Reader:
 
     def sequence(self, value: Any, field: str) -> list:
         if not isinstance(value, list) or not value:
-            raise self.fail(field, f"expected a non-empty list, got {value!r}")
+            raise self.fail(field, f"expected a non-empty list, got {bounded_repr(value)}")
         return value
 
     def pose(self, value: Any, field: str) -> np.ndarray:
@@ -165,7 +192,7 @@ class _Reader:
         try:
             return JointType(str(value).strip().lower())
         except ValueError:
-            raise self.fail(field, f"{value!r} is not a joint type; valid: revolute, prismatic") from None
+            raise self.fail(field, f"{bounded_repr(value)} is not a joint type; valid: revolute, prismatic") from None
 
     def limits(self, value: Any, field: str, joint_type: JointType) -> dict[str, float]:
         """Joint limits; prismatic ones are lengths and get scaled."""
@@ -175,9 +202,11 @@ class _Reader:
         unknown = set(limits) - {"lower", "upper", "velocity"}
         if unknown:
             raise self.fail(f"{field}.{sorted(unknown)[0]}", "unknown key; valid: lower, upper, velocity")
-        lower = self.scalar(limits.get("lower", -default_range / scale), f"{field}.lower") * scale
-        upper = self.scalar(limits.get("upper", default_range / scale), f"{field}.upper") * scale
-        velocity = self.scalar(limits.get("velocity", 2.0 / scale), f"{field}.velocity") * scale
+        lower = self.scalar(limits.get("lower", -default_range / scale), f"{field}.lower", limit=True) * scale
+        upper = self.scalar(limits.get("upper", default_range / scale), f"{field}.upper", limit=True) * scale
+        velocity = self.scalar(limits.get("velocity", 2.0 / scale), f"{field}.velocity", limit=True) * scale
+        if lower == math.inf or upper == -math.inf:
+            raise self.fail(f"{field}", f"lower {lower} and upper {upper}; valid: lower < +inf, upper > -inf")
         if lower > upper:
             raise self.fail(f"{field}", f"lower {lower} > upper {upper}")
         if not velocity > 0:
@@ -224,16 +253,16 @@ def _joints_from_dh(reader: _Reader, rows: list) -> tuple[list[Joint], np.ndarra
         missing = [k for k in ("d", "theta", "a", "alpha") if k not in row]
         if missing:
             raise reader.fail(f"{field}.{missing[0]}", "missing; every DH row has d, theta, a, alpha")
-        d = reader.scalar(row["d"], f"{field}.d") * reader.scale
+        d = reader.length(row["d"], f"{field}.d")
         theta = reader.scalar(row["theta"], f"{field}.theta")
-        a = reader.scalar(row["a"], f"{field}.a") * reader.scale
+        a = reader.length(row["a"], f"{field}.a")
         alpha = reader.scalar(row["alpha"], f"{field}.alpha")
         variable = row.get("joint")
         if variable is None:
             pending = pending @ _dh_transform(d, theta, a, alpha)
             continue
         if variable not in ("theta", "d"):
-            raise reader.fail(f"{field}.joint", f"{variable!r}; valid: theta (revolute) or d (prismatic)")
+            raise reader.fail(f"{field}.joint", f"{bounded_repr(variable)}; valid: theta (revolute) or d (prismatic)")
         joint_type = JointType.REVOLUTE if variable == "theta" else JointType.PRISMATIC
         name = str(row.get("name", f"joint{len(joints) + 1}"))
         # Rz(θ0 + q)… = Rz(q)·Rz(θ0)…, and Tz(d0 + q) commutes with Rz(θ): the motion comes
@@ -267,6 +296,8 @@ def _joints_from_poe(reader: _Reader, description: Any) -> tuple[list[Joint], np
         field = f"poe.screws[{name}]"
         screw = reader.vector(entry.get("screw"), f"{field}.screw", 6)
         omega, v = screw[:3], screw[3:] * reader.scale
+        for i, component in enumerate(v, start=3):
+            reader.bounded(float(component), f"{field}.screw[{i}]")
         if np.linalg.norm(omega) > 1e-9:
             if abs(np.linalg.norm(omega) - 1.0) > 1e-6:
                 raise reader.fail(f"{field}.screw", f"|ω| = {np.linalg.norm(omega):.6g}; valid: 1 (revolute) or 0")
@@ -316,10 +347,10 @@ def model_from_dict(description: Any, source: str, base_dir: Path | None = None)
         )
     units = str(data.get("units", "m")).strip().lower()
     if units not in ("m", "mm"):
-        raise reader.fail("units", f"{units!r}; valid: m, mm")
+        raise reader.fail("units", f"{bounded_repr(units)}; valid: m, mm")
     reader.scale = reader.scalar(data.get("scale", 0.001 if units == "mm" else 1.0), "scale")
-    if not reader.scale > 0:
-        raise reader.fail("scale", f"{reader.scale}; valid: a positive factor")
+    if not reader.scale > 1.0 / MAX_MAGNITUDE:
+        raise reader.fail("scale", f"{reader.scale}; valid: a factor > {1.0 / MAX_MAGNITUDE:g}")
 
     kind = present[0]
     if kind == "urdf":
@@ -366,17 +397,9 @@ def _model_from_urdf_reference(reader: _Reader, data: dict, base_dir: Path | Non
 
 
 def load_robot_yaml(path: str | Path) -> RobotModel:
-    """Load a robot YAML file; errors name the file and the field."""
+    """Load a robot YAML file; errors name the file and the field (caps: :mod:`manip_kin.robot_files`)."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as error:
-        raise ModelFileError(str(path), "<file>", f"cannot read: {error.strerror}") from None
-    try:
-        description = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "<file>"
-        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
-        raise ModelFileError(str(path), where, f"malformed YAML: {problem}") from None
-    return model_from_dict(description, str(path), path.parent)
+    data = read_robot_file(path)
+    if robot_file_kind(data) == "urdf":
+        raise ModelFileError(str(path), "<file>", "this is XML, not a robot YAML; load it as a URDF")
+    return model_from_dict(parse_yaml(data, str(path)), str(path), path.parent)

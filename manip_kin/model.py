@@ -166,6 +166,14 @@ class RobotModel:
         names = [j.name for j in self.joints]
         if len(set(names)) != len(names):
             raise ModelFileError(self.source or self.name, "joints", f"joint names repeat: {names}")
+        where = self.source or self.name
+        fixed = [
+            (f"{j.name}.{part}", getattr(j, part)) for j in self.joints for part in ("origin", "axis", "child_offset")
+        ]
+        fixed += [("ee_offset", self.ee_offset)] + ([("tool", self.tool)] if self.tool is not None else [])
+        for field_name, value in fixed:
+            if not np.all(np.isfinite(np.asarray(value, dtype=float))):
+                raise ModelFileError(where, field_name, "contains NaN or infinity; valid: finite numbers")
         for j in self.joints:
             if not j.lower <= j.upper:
                 raise ModelFileError(self.source or self.name, f"{j.name}.limits", f"lower {j.lower} > upper {j.upper}")

@@ -39,17 +39,18 @@ FIGURES = (
     "path_3d.png",
 )
 TF_FIGURE = "arm_tf.png"
-_PLOTTED_TOPICS = (
-    "/joint_states",
-    "/joint_velocity_commands",
-    "/tool_pose",
-    "/ee_pose",
-    "/goal_pose",
-    "/tool_twist",
-    "/ee_twist",
-    "/planned_path",
-    "/robot_description",
-)
+#: The topics plotted and the type each must have; a topic of another type is not read.
+PLOTTED_TOPIC_TYPES = {
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/joint_velocity_commands": "std_msgs/msg/Float64MultiArray",
+    "/tool_pose": "geometry_msgs/msg/PoseStamped",
+    "/ee_pose": "geometry_msgs/msg/PoseStamped",
+    "/goal_pose": "geometry_msgs/msg/PoseStamped",
+    "/tool_twist": "geometry_msgs/msg/TwistStamped",
+    "/ee_twist": "geometry_msgs/msg/TwistStamped",
+    "/planned_path": "nav_msgs/msg/Path",
+    "/robot_description": "std_msgs/msg/String",
+}
 
 
 @dataclass
@@ -82,6 +83,8 @@ class RunData:
         planned_paths: each planned line as positions, shape (K, 3).
         robot_description: the URDF published by robot_state ('' if not recorded).
         arm: the frames of the recording's TF over time, or None without ``/tf``.
+        found_by_type: plotted topic -> the recorded topic read for it, where that was
+            found by its type (remapped, e.g. to a ros2_control controller's topic).
     """
 
     joint_names: list[str] = field(default_factory=list)
@@ -97,6 +100,7 @@ class RunData:
     planned_paths: list[np.ndarray] = field(default_factory=list)
     robot_description: str = ""
     arm: ArmFrames | None = None
+    found_by_type: dict[str, str] = field(default_factory=dict)
 
 
 def _pose_series(samples: list[tuple[float, object]]) -> PoseSeries:
@@ -119,27 +123,67 @@ def _twist_series(samples: list[tuple[float, object]]) -> TwistSeries:
     return TwistSeries(time, angular, linear)
 
 
+def plotted_topics(recorded: dict[str, str], prefix: str = "") -> dict[str, str]:
+    """Recorded topic -> the plotted topic it is read as, from the recording's topic types.
+
+    A plotted topic is read under its own name (in ``prefix``) when it has the expected type.
+    When that name is absent, a type that only one plotted topic has (JointState,
+    Float64MultiArray, Path, String) is looked up by type: the one recorded topic of that type
+    not already read is used (the commands remapped to ``/forward_velocity_controller/commands``).
+    Poses and twists, of which several are plotted, are read by name only.
+
+    Args:
+        recorded: every recorded topic name -> its type (``pkg/msg/Type``).
+        prefix: the pipeline's namespace (``/left``) or "".
+    """
+    chosen = {
+        prefix + name: name
+        for name, type_name in PLOTTED_TOPIC_TYPES.items()
+        if recorded.get(prefix + name) == type_name
+    }
+    named = {prefix + name for name in PLOTTED_TOPIC_TYPES}  # never read as another plotted topic
+    type_counts: dict[str, int] = {}
+    for type_name in PLOTTED_TOPIC_TYPES.values():
+        type_counts[type_name] = type_counts.get(type_name, 0) + 1
+    for name, type_name in PLOTTED_TOPIC_TYPES.items():
+        if prefix + name in recorded or type_counts[type_name] != 1:
+            continue
+        candidates = [
+            topic for topic, t in recorded.items() if t == type_name and topic not in chosen and topic not in named
+        ]
+        if len(candidates) == 1:
+            chosen[candidates[0]] = name
+    return chosen
+
+
 def load_run(path: str | Path, namespace: str = "") -> RunData:
     """Read a recording (``.mcap`` file or bag directory) into :class:`RunData`.
 
-    ``namespace`` selects the pipeline (``/left`` reads ``/left/joint_states``...).
+    ``namespace`` selects the pipeline (``/left`` reads ``/left/joint_states``...). Topics are
+    matched by name and type (:func:`plotted_topics`).
     """
     from manip_kin.pipeline.client import normalize_namespace
-    from manip_kin.recording import read_messages
+    from manip_kin.recording import RecordingError, read_info, read_messages
 
     prefix = normalize_namespace(namespace)
+    recorded = {topic.name: topic.type for topic in read_info(path).topics}
+    chosen = plotted_topics(recorded, prefix)
 
     by_topic: dict[str, list[tuple[int, object]]] = {}
-    for topic, message, log_time_ns, _publish_ns in read_messages(path, topics=[prefix + t for t in _PLOTTED_TOPICS]):
-        by_topic.setdefault(topic, []).append((log_time_ns, message))
+    for topic, message, log_time_ns, _publish_ns in read_messages(path, topics=list(chosen)):
+        by_topic.setdefault(chosen[topic], []).append((log_time_ns, message))
     if not by_topic:
-        raise ManipKinError(f"{path}: the recording holds no messages; nothing to plot")
+        expected = ", ".join(prefix + name for name in PLOTTED_TOPIC_TYPES)
+        raise RecordingError(
+            f"{path}: the recording holds no messages on a plotted topic ({expected}); nothing to plot"
+        )
     start_ns = min(samples[0][0] for samples in by_topic.values())
 
     def seconds(topic: str) -> list[tuple[float, object]]:
-        return [((t - start_ns) * 1e-9, m) for t, m in by_topic.get(prefix + topic, [])]
+        return [((t - start_ns) * 1e-9, m) for t, m in by_topic.get(topic, [])]
 
     run = RunData()
+    run.found_by_type = {name: topic for topic, name in chosen.items() if topic != prefix + name}
     joint_samples = [(t, m) for t, m in seconds("/joint_states") if len(m.position)]
     if joint_samples:
         run.joint_names = list(joint_samples[0][1].name)

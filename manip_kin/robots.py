@@ -59,32 +59,40 @@ def bundled_robot_names() -> list[str]:
     return list(bundled_robot_files())
 
 
-def is_urdf_path(path: str | os.PathLike) -> bool:
-    """True for a ``.urdf`` or ``.xml`` file name."""
-    return Path(path).suffix.lower() in (".urdf", ".xml")
-
-
 @functools.lru_cache(maxsize=32)
 def _load_cached(key: str, mtime: float, links: tuple[str | None, str | None, str | None]) -> RobotModel:
-    path = Path(key)
-    if is_urdf_path(path):
-        from manip_kin.urdf import load_urdf
+    # The type is the content's (robot_file_kind), not the name's: a symlink named .urdf may
+    # point at a file without that suffix.
+    from manip_kin.robot_files import read_robot_file, robot_file_kind
+
+    shown = key
+    data = read_robot_file(key)
+    if robot_file_kind(data) == "urdf":
+        from manip_kin.urdf import load_urdf_string
 
         base_link, tip_link, tool_link = links
-        return load_urdf(path, base_link=base_link, tip_link=tip_link, tool_link=tool_link)
-    from manip_kin.loaders import load_robot_yaml
+        return load_urdf_string(data, source=shown, base_link=base_link, tip_link=tip_link, tool_link=tool_link)
+    if any(links):
+        given = ", ".join(f"{name}={value!r}" for name, value in zip(LINK_PARAMETERS, links) if value)
+        raise InvalidArgumentError(
+            f"{given} given for robot {shown!r}, which is not a URDF; valid: link names select the chain "
+            "of a URDF file only (a robot YAML lists its own joints)"
+        )
+    from manip_kin.loaders import model_from_dict
+    from manip_kin.robot_files import parse_yaml
 
-    return load_robot_yaml(path)
+    return model_from_dict(parse_yaml(data, shown), shown, Path(key).parent)
 
 
 def resolve_robot_path(robot: str | os.PathLike) -> Path:
-    """The file behind a bundled robot name or a path; :class:`UnknownRobotError` otherwise."""
+    """The file behind a bundled robot name or a path (any regular file: its content says
+    whether it is a URDF or a robot YAML); :class:`UnknownRobotError` otherwise."""
     text = str(robot).strip()
     bundled = bundled_robot_files()
     if text in bundled:
         return bundled[text]
     path = Path(text).expanduser()
-    if path.is_file() and path.suffix.lower() in (".yaml", ".yml", ".urdf", ".xml"):
+    if path.is_file():
         return path.resolve()
     raise UnknownRobotError(text, bundled)
 
@@ -112,12 +120,6 @@ def load_robot(
     """
     path = resolve_robot_path(robot)
     links = (base_link or None, tip_link or None, tool_link or None)
-    if any(links) and not is_urdf_path(path):
-        given = ", ".join(f"{name}={value!r}" for name, value in zip(LINK_PARAMETERS, links) if value)
-        raise InvalidArgumentError(
-            f"{given} given for robot {str(robot)!r}, which is not a URDF; valid: link names select the chain "
-            "of a .urdf file only (a robot YAML lists its own joints)"
-        )
     return _load_cached(str(path), path.stat().st_mtime, links)
 
 

@@ -58,19 +58,28 @@ def test_ik_all_irb120_lists_every_in_limit_solution(capsys):
         math.atan2(target[1, 0], target[0, 0]),
     ]
     xyz = target[:3, 3]
-    result = run_json(capsys, "ik", "--robot", "irb120", "--xyz", *map(str, xyz), "--rpy", *map(str, rpy), "--all")
+    args = ["ik", "--robot", "irb120", "--xyz", *map(str, xyz), "--rpy", *map(str, rpy), "--all"]
+    result = run_json(capsys, *args, "--wraps")
     assert result["solver"] == "closed_form:opw"
     assert result["count"] == len(result["solutions"]) >= 2
     goal = homogeneous(rpy_matrix(*rpy), xyz)
     limits = np.radians([165, 110, 110, 160, 120, 400])
+    every_q = [s["q"] for s in result["solutions"]] + [w for s in result["solutions"] for w in s["wrap_q"]]
+    assert len(every_q) == result["count"] + result["wrap_count"]
     for solution in result["solutions"]:
-        assert set(solution) == SOLUTION_KEYS
+        assert set(solution) == SOLUTION_KEYS | {"wraps", "wrap_q"} and solution["wraps"] == len(solution["wrap_q"])
         assert solution["position_error"] < 1e-9 and solution["orientation_error"] < 1e-9
-        np.testing.assert_allclose(irb120_pose(solution["q"]), goal, atol=1e-9)
-        assert np.all(np.abs(solution["q"]) <= limits + 1e-12) and solution["q"][2] <= math.radians(70) + 1e-12
-    # q itself (joint 6 at -1.1 rad) and its in-limit turn (+2π; -2π is beyond -400°)
-    q6 = sorted(s["q"][5] for s in result["solutions"] if np.allclose(s["q"][:5], q[:5], atol=1e-9))
-    np.testing.assert_allclose(q6, [-1.1, -1.1 + 2 * math.pi], atol=1e-9)
+    for values in every_q:
+        np.testing.assert_allclose(irb120_pose(values), goal, atol=1e-9)
+        assert np.all(np.abs(values) <= limits + 1e-12) and values[2] <= math.radians(70) + 1e-12
+    # q itself (joint 6 at -1.1 rad) is the solution, its in-limit turn (+2π; -2π is beyond -400°) its wrap
+    (same,) = [s for s in result["solutions"] if np.allclose(s["q"][:5], q[:5], atol=1e-9)]
+    np.testing.assert_allclose(same["q"][5], -1.1, atol=1e-9)
+    np.testing.assert_allclose([w[5] for w in same["wrap_q"]], [-1.1 + 2 * math.pi], atol=1e-9)
+    # Without --wraps: the same solutions, the wraps only counted.
+    plain = run_json(capsys, *args)
+    assert [s["q"] for s in plain["solutions"]] == [s["q"] for s in result["solutions"]]
+    assert all("wrap_q" not in s for s in plain["solutions"]) and plain["wrap_count"] == result["wrap_count"]
 
 
 def test_ik_all_rpp_and_scara_closed_forms(capsys):
@@ -100,8 +109,8 @@ def test_ik_all_opw_urdf_file(capsys, tmp_path):
     args = ["ik", "--robot", str(path), "--xyz", *map(str, target[:3, 3]), "--quat", *map(str, quat), "--all"]
     result = run_json(capsys, *args)
     assert result["solver"] == "closed_form:opw" and result["frame"] == "ee"
-    # the URDF's tip is tool0 here (the chain ends there): 8 branches x 2 turns of joint 6 (±2π limits)
-    assert len(result["solutions"]) == 16
+    # the URDF's tip is tool0 here (the chain ends there): 8 branches, each with 1 turn of joint 6 (±2π limits)
+    assert len(result["solutions"]) == 8 and [s["wraps"] for s in result["solutions"]] == [1] * 8
     for solution in result["solutions"]:
         np.testing.assert_allclose(opw_reference_pose(solution["q"]), target, atol=1e-9)
 
@@ -125,7 +134,7 @@ def test_ik_all_numeric_for_genova7(capsys):
     goal = homogeneous(rpy_matrix(0, 1.57, 0), [0.2, -0.7, 0.3])
     tool = homogeneous(rpy_matrix(math.pi / 6, 0, math.pi / 10), [0.3, 0.1, 0])
     for solution in result["solutions"]:
-        assert set(solution) == SOLUTION_KEYS
+        assert set(solution) == SOLUTION_KEYS | {"wraps"}
         np.testing.assert_allclose(genova7_frames(solution["q"])[-1] @ tool, goal, atol=1e-5)
 
 
@@ -210,3 +219,24 @@ def test_sweep_bad_input(capsys, tmp_path, extra, message):
         args += ["--q-goal", *["1"] * 7]
     code, out, err = run(capsys, *args, *extra)
     assert code == 2 and out == "" and err.count("\n") == 1 and message in err
+
+
+def test_wraps_fold_into_one_solution_and_distinct_solutions_stay(capsys):
+    from manip_kin.closed_form import Solution
+    from manip_kin.ik_all import group_wraps
+    from manip_kin.robots import load_robot
+
+    model = load_robot("genova7")  # joint 6 prismatic: never wrapped
+    q = np.array([0.1, -0.2, 0.3, -0.4, 0.5, 0.15, 0.7])
+    turned = q + np.array([2 * math.pi, 0, 0, -2 * math.pi, 0, 0, 4 * math.pi])
+    other = q.copy()
+    other[5] += 2 * math.pi * 1e-3  # a prismatic joint differing is another solution
+    near_pi = q.copy()
+    near_pi[0] = math.pi - 1e-9
+    across = near_pi.copy()
+    across[0] = -math.pi + 1e-9  # the same angle, written across the ±π seam
+    solutions = [Solution(turned, "b+", 0.0, 0.0), Solution(q, "b", 0.0, 0.0), Solution(other, "c", 0.0, 0.0)]
+    solutions += [Solution(near_pi, "d", 0.0, 0.0), Solution(across, "d'", 0.0, 0.0)]
+    groups = group_wraps(model, solutions)
+    assert [g.solution.branch for g in groups] == ["b", "c", "d"]  # the fewest turns represents a group
+    assert [[w.branch for w in g.wraps] for g in groups] == [["b+"], [], ["d'"]]

@@ -72,6 +72,7 @@ def test_robots_lists_every_bundled_robot(capsys):
         "upper": 0.3,
         "velocity": 0.5,
         "unit": "m",
+        "link": "link6",
     }
 
 
@@ -112,3 +113,13 @@ def test_help_explains_units():
     result = subprocess.run([str(EXECUTABLE), "fk", "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0
     assert "--q" in result.stdout and "[rad] or [m]" in result.stdout
+
+
+def test_json_output_never_holds_nan_or_infinity(capsys):
+    from manip_kin.cli.common import print_json
+    from manip_kin.errors import OperationError
+
+    for value in (float("nan"), float("inf")):
+        with pytest.raises(OperationError, match="NaN or infinity"):
+            print_json({"xyz": [0.0, value, 0.0]})
+    assert capsys.readouterr().out == ""  # nothing half-printed

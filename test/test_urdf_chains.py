@@ -218,3 +218,63 @@ def test_cli_move_passes_the_link_options_to_the_model(capsys):
     # Refused before anything is sent: link names for a robot YAML.
     code, out, err = run_cli(capsys, ["move", "--robot", "scara", "--tip-link", "link2", "--q", "0", "0", "0", "0"])
     assert code == 2 and "tip_link='link2'" in err and "not a URDF" in err
+
+
+def _arm_with_gripper(gripper_joint: str, gripper_link: str, below: str = "") -> str:
+    return f"""<robot name="z">
+  <link name="base"/><link name="l1"/><link name="l2"/><link name="stator"/><link name="{gripper_link}"/>{below}
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" velocity="1"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" velocity="1"/></joint>
+  <joint name="stator_mount" type="fixed"><parent link="l2"/><child link="stator"/><origin xyz="0.05 0 0"/></joint>
+  <joint name="{gripper_joint}" type="revolute"><parent link="stator"/><child link="{gripper_link}"/>
+    <origin xyz="0.05 0 0"/><axis xyz="0 1 0"/><limit lower="-1.5" upper="0" velocity="3"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("joint, link", [("jointGripper", "gripperMover"), ("j3", "left_finger"), ("jaw", "m")])
+def test_default_chain_leaves_a_leaf_gripper_joint_out(joint, link):
+    model = load_urdf_string(_arm_with_gripper(joint, link))
+    assert model.joint_names == ["j1", "j2"]
+    # The tip is the gripper's parent link: ee 0.05 m beyond l2, at the stator.
+    np.testing.assert_allclose(frame_pose(model, [0.0, 0.0])[:3, 3], [0.05, 0.0, 0.3], atol=1e-12)
+    assert load_urdf_string(_arm_with_gripper(joint, link), tip_link=link).joint_names == ["j1", "j2", joint]
+
+
+def test_a_joint_named_like_a_gripper_stays_when_something_moves_below_it():
+    below = '<link name="l4"/><joint name="j4" type="revolute"><parent link="gripperMover"/><child link="l4"/><limit lower="-1" upper="1" velocity="1"/></joint>'
+    assert load_urdf_string(_arm_with_gripper("jointGripper", "gripperMover", below)).dof == 4
+    # Not named like a gripper: a plain last joint stays.
+    assert load_urdf_string(_arm_with_gripper("j3", "l3")).joint_names == ["j1", "j2", "j3"]
+
+
+def test_robots_describes_a_urdf_file_with_its_chain(capsys, tmp_path):
+    path = tmp_path / "z1_like.urdf"
+    path.write_text(_arm_with_gripper("jointGripper", "gripperMover"))
+    assert main(["robots", "--robot", str(path), "--json"]) == 0
+    (robot,) = json.loads(capsys.readouterr().out)["robots"].values()
+    assert robot["chain"] == ["base", "l1", "l2", "ee"] and robot["dof"] == 2
+    assert robot["joints"][1] == {
+        "name": "j2",
+        "type": "revolute",
+        "lower": -1.0,
+        "upper": 1.0,
+        "velocity": 1.0,
+        "unit": "rad",
+        "link": "l2",
+    }
+    assert main(["robots", "--robot", str(path), "--tip-link", "gripperMover"]) == 0
+    text = capsys.readouterr().out
+    assert "chain: base -> l1 -> l2 -> gripperMover -> ee" in text and "jointGripper" in text
+
+
+def test_robots_json_has_null_for_infinite_limits(capsys, tmp_path):
+    path = tmp_path / "c.urdf"
+    path.write_text(
+        '<robot name="c"><link name="a"/><link name="b"/><joint name="j" type="continuous">'
+        '<parent link="a"/><child link="b"/></joint></robot>'
+    )
+    assert main(["robots", "--robot", str(path), "--json"]) == 0
+    joint = json.loads(capsys.readouterr().out)["robots"]["c"]["joints"][0]
+    assert (joint["lower"], joint["upper"], joint["velocity"]) == (None, None, None)

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from manip_kin.errors import InvalidArgumentError, JointCountError
+from manip_kin.errors import InvalidArgumentError, JointCountError, OperationError
 from manip_kin.model import RobotModel
 from manip_kin.robots import bundled_robot_names, load_robot
 from manip_kin.rotations import make_transform, matrix_to_quat, matrix_to_rpy, quat_to_matrix, rpy_to_matrix
@@ -157,8 +157,17 @@ def pose_summary(pose: np.ndarray) -> dict:
 
 
 def print_json(payload: dict) -> None:
-    """One JSON object, one line, on stdout."""
-    sys.stdout.write(json.dumps(payload) + "\n")
+    """One JSON object, one line, on stdout.
+
+    Raises:
+        OperationError: the payload holds NaN or infinity, which JSON cannot carry; nothing
+            is printed (a reader must never get ``NaN``).
+    """
+    try:
+        text = json.dumps(payload, allow_nan=False)
+    except ValueError:
+        raise OperationError("the result holds NaN or infinity, which JSON cannot carry; nothing printed") from None
+    sys.stdout.write(text + "\n")
 
 
 def format_matrix(matrix: np.ndarray, indent: str = "  ") -> str:

@@ -1,11 +1,12 @@
-"""``manip_kin ik --all``: every solution within the joint limits, closed form or numeric."""
+"""``manip_kin ik --all``: every distinct solution within the joint limits (closed form or numeric),
+the ±2π wraps of revolute joints as a count per solution (``--wraps`` lists them)."""
 
 from __future__ import annotations
 
 import argparse
 
 from manip_kin.cli.common import print_json
-from manip_kin.ik_all import all_ik_solutions
+from manip_kin.ik_all import all_ik_solutions, group_wraps
 from manip_kin.model import RobotModel
 
 
@@ -25,19 +26,27 @@ def run_ik_all(args: argparse.Namespace, model: RobotModel, target, q0, task: st
         seed=args.seed,
     )
     frame = model.frame_name(model.frame_index(args.frame or model.default_frame))
+    groups = group_wraps(model, found.solutions)
+    wrap_count = sum(len(group.wraps) for group in groups)
     if args.json:
+        entries = []
+        for group in groups:
+            solution = group.solution
+            entry = {
+                "q": solution.q.tolist(),
+                "branch": solution.branch,
+                "position_error": solution.position_error,
+                "orientation_error": solution.orientation_error,
+                "wraps": len(group.wraps),
+            }
+            if args.wraps:
+                entry["wrap_q"] = [wrap.q.tolist() for wrap in group.wraps]
+            entries.append(entry)
         payload = {
-            "solutions": [
-                {
-                    "q": solution.q.tolist(),
-                    "branch": solution.branch,
-                    "position_error": solution.position_error,
-                    "orientation_error": solution.orientation_error,
-                }
-                for solution in found.solutions
-            ],
+            "solutions": entries,
             "solver": found.solver,
-            "count": len(found.solutions),
+            "count": len(groups),
+            "wrap_count": wrap_count,
             "task": found.task,
             "frame": frame,
             "elapsed_s": found.elapsed,
@@ -46,16 +55,24 @@ def run_ik_all(args: argparse.Namespace, model: RobotModel, target, q0, task: st
             payload["reason"] = found.reason
         print_json(payload)
     else:
+        wraps_text = f", and {wrap_count} ±2π wraps of them{'' if args.wraps else ' (--wraps lists them)'}"
         print(
-            f"{model.name}: {len(found.solutions)} IK solution(s) within the limits for frame '{frame}' "
-            f"({found.solver}, task {found.task}, {found.elapsed * 1e3:.2f} ms)"
+            f"{model.name}: {len(groups)} distinct IK solution(s) within the limits for frame '{frame}'"
+            f"{wraps_text if wrap_count else ''} ({found.solver}, task {found.task}, {found.elapsed * 1e3:.2f} ms)"
         )
         if found.reason:
             print(f"  reason: {found.reason}")
-        for solution in found.solutions:
-            q = " ".join(f"{value:9.5f}" for value in solution.q)
+        for group in groups:
+            solution = group.solution
+            wraps = f"  +{len(group.wraps)} wrap{'s' if len(group.wraps) != 1 else ''}" if group.wraps else ""
             print(
-                f"  [{q}]  {solution.branch}  (errors {solution.position_error:.1e} m, "
-                f"{solution.orientation_error:.1e} rad)"
+                f"  [{_values(solution.q)}]  {solution.branch}  (errors {solution.position_error:.1e} m, "
+                f"{solution.orientation_error:.1e} rad){wraps}"
             )
+            for wrap in group.wraps if args.wraps else ():
+                print(f"      [{_values(wrap.q)}]  {wrap.branch}")
     return 0 if found.solutions else 1
+
+
+def _values(q) -> str:
+    return " ".join(f"{value:9.5f}" for value in q)

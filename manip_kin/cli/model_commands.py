@@ -9,6 +9,7 @@ from pathlib import Path
 from manip_kin.cli.common import (
     add_joint_argument,
     add_json_argument,
+    add_link_arguments,
     add_robot_argument,
     format_matrix,
     joints_from_args,
@@ -16,6 +17,7 @@ from manip_kin.cli.common import (
     print_json,
     robot_from_args,
 )
+from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import JACOBIAN_KINDS, jacobian, transform_between
 from manip_kin.robots import bundled_robot_files, load_robot
 from manip_kin.sweep import joint_sweep, plot_sweep
@@ -23,7 +25,20 @@ from manip_kin.sweep import joint_sweep, plot_sweep
 
 def register(subparsers) -> None:
     """Add the model sub-commands."""
-    robots = subparsers.add_parser("robots", help="list the bundled robots with their joints and limits")
+    robots = subparsers.add_parser(
+        "robots",
+        help="list the bundled robots with their joints and limits, or describe one robot file (--robot)",
+        description="Without --robot: every bundled robot. With --robot NAME|FILE: that robot's joints, "
+        "limits and chain (for a URDF, the chain --base-link/--tip-link/--tool-link select). "
+        "Infinite limits (continuous joints, no velocity limit) are null in --json.",
+    )
+    robots.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAME|FILE",
+        help="describe only this robot: a bundled name or a YAML/URDF file",
+    )
+    add_link_arguments(robots)
     add_json_argument(robots)
     robots.set_defaults(run=run_robots)
 
@@ -77,44 +92,69 @@ def register(subparsers) -> None:
     sweep.set_defaults(run=run_sweep)
 
 
+def _finite_or_none(value: float) -> float | None:
+    """A limit for JSON, which has no infinity: None means "no limit"."""
+    return value if math.isfinite(value) else None
+
+
 def _joint_summary(model) -> list[dict]:
-    rows = []
-    for joint in model.joints:
-        rows.append(
-            {
-                "name": joint.name,
-                "type": joint.type.value,
-                "lower": joint.lower,
-                "upper": joint.upper,
-                "velocity": joint.velocity_limit,
-                "unit": "rad" if joint.is_revolute else "m",
-            }
-        )
-    return rows
+    return [
+        {
+            "name": joint.name,
+            "type": joint.type.value,
+            "lower": _finite_or_none(joint.lower),
+            "upper": _finite_or_none(joint.upper),
+            "velocity": _finite_or_none(joint.velocity_limit),
+            "unit": "rad" if joint.is_revolute else "m",
+            "link": joint.link_name,
+        }
+        for joint in model.joints
+    ]
+
+
+def _chain(model) -> list[str]:
+    """The frames from the base to the end effector (and tool): base, each joint's link, ee."""
+    links = [joint.link_name or f"link{i}" for i, joint in enumerate(model.joints, start=1)]
+    return [model.base_frame, *links, "ee", *(["tool"] if model.has_tool else [])]
+
+
+def _robot_summary(model, file: str) -> dict:
+    return {
+        "file": file,
+        "name": model.name,
+        "dof": model.dof,
+        "tool": model.has_tool,
+        "base_frame": model.base_frame,
+        "chain": _chain(model),
+        "joints": _joint_summary(model),
+    }
+
+
+def _limit_text(value: float | None, scale: float) -> str:
+    return f"{value * scale:8.2f}" if value is not None else "    none"
 
 
 def run_robots(args: argparse.Namespace) -> int:
-    robots = {}
-    for name, path in bundled_robot_files().items():
-        model = load_robot(name)
-        robots[name] = {
-            "file": str(path),
-            "dof": model.dof,
-            "tool": model.has_tool,
-            "base_frame": model.base_frame,
-            "joints": _joint_summary(model),
-        }
+    if args.robot is not None:
+        model = robot_from_args(args)
+        robots = {model.name: _robot_summary(model, model.source or str(args.robot))}
+    else:
+        if args.base_link or args.tip_link or args.tool_link:
+            raise InvalidArgumentError("--base-link/--tip-link/--tool-link need --robot FILE (a URDF)")
+        robots = {name: _robot_summary(load_robot(name), str(path)) for name, path in bundled_robot_files().items()}
     if args.json:
         print_json({"robots": robots})
         return 0
     for name, info in robots.items():
         print(f"{name}: {info['dof']} joints{', with tool' if info['tool'] else ''}  ({info['file']})")
+        print(f"  chain: {' -> '.join(info['chain'])}")
         for joint in info["joints"]:
             scale = 180.0 / math.pi if joint["unit"] == "rad" else 1.0
             unit = "deg" if joint["unit"] == "rad" else "m"
+            lower, upper = _limit_text(joint["lower"], scale), _limit_text(joint["upper"], scale)
             print(
-                f"  {joint['name']:<10} {joint['type']:<9} [{joint['lower'] * scale:8.2f}, {joint['upper'] * scale:8.2f}] {unit:<3}"
-                f"  max {joint['velocity'] * scale:7.2f} {unit}/s"
+                f"  {joint['name']:<10} {joint['type']:<9} [{lower}, {upper}] {unit:<3}"
+                f"  max {_limit_text(joint['velocity'], scale)} {unit}/s"
             )
     return 0
 

@@ -92,9 +92,14 @@ def register(subparsers) -> None:
     ik.add_argument(
         "--all",
         action="store_true",
-        help="list every solution within the joint limits (each revolute joint wrapped into its limits, "
-        "every in-limit wrap listed), from the closed form when the arm has one, else from seeded "
-        "restarts within --time-budget",
+        help="list every distinct solution within the joint limits, from the closed form when the arm has "
+        "one, else from seeded restarts within --time-budget; solutions that differ only by whole turns "
+        "(±2π) of revolute joints are one solution with a count of wraps (--wraps lists them)",
+    )
+    ik.add_argument(
+        "--wraps",
+        action="store_true",
+        help="with --all: also list every in-limit ±2π wrap of each solution (JSON: wrap_q)",
     )
     ik.add_argument(
         "--solver",

@@ -61,6 +61,8 @@ def run_plot(args: argparse.Namespace) -> int:
     source = Path(args.file)
     out_dir = Path(args.out) if args.out else source.parent / f"{source.stem}_plots"
     run = load_run(source, namespace=args.namespace)
+    for plotted, recorded in run.found_by_type.items():
+        print(f"plot: {plotted} read from {recorded} (found by its type)", file=sys.stderr)
     paths = plot_run(run, out_dir, title=args.title or source.stem)
     for path in paths:
         print(path)

@@ -46,6 +46,7 @@ from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.messages import message_class
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.tf_synthesis import TF_TOPICS, TfSynthesizer, write_tf
+from manip_kin.recording.write_failure import RecordingWriteError
 from manip_kin.recording.writer import RecordingWriter
 
 # Every manip_kin topic is subscribed at start, before any publisher is seen, so a one-shot
@@ -125,6 +126,7 @@ class RecorderNode(Node):
         self._stopping = threading.Event()
         self._finished_line: str | None = None
         self._stop_reason = ""
+        self._write_error: RecordingWriteError | None = None
         if not self._all_topics:
             for topic in sorted(self._wanted):
                 known_type = _manip_kin_type(topic)
@@ -248,7 +250,17 @@ class RecorderNode(Node):
 
     def _flush_if_due(self) -> None:
         with self._lock:
-            self._writer.flush_if_due()
+            try:
+                self._writer.flush_if_due()
+            except RecordingWriteError as error:
+                self._on_write_error(error)
+
+    def _on_write_error(self, error: RecordingWriteError) -> None:
+        """The disk failed (lock held): one ERROR line, then stop; ``finish`` ends the file."""
+        if self._write_error is None:
+            self._write_error = error
+            self.get_logger().error(str(error))
+            self._stop("the recording could not be written")
 
     def _on_duration(self) -> None:
         self._duration_timer.cancel()
@@ -302,11 +314,17 @@ class RecorderNode(Node):
             ):
                 return False
             received = info.get("received_timestamp") or time.time_ns()
-            if not self._writer.has_topic(entry.name):
-                self._add_channel(entry.name, entry.type_name, self._publishers_or_none(entry.name) or [])
-            self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
-            if self._tf is not None:
-                self._synthesise_tf(entry, data, received)
+            if self._write_error is not None:
+                return False
+            try:
+                if not self._writer.has_topic(entry.name):
+                    self._add_channel(entry.name, entry.type_name, self._publishers_or_none(entry.name) or [])
+                self._writer.write_raw(entry.name, data, received, source_time_ns=info.get("source_timestamp") or None)
+                if self._tf is not None:
+                    self._synthesise_tf(entry, data, received)
+            except RecordingWriteError as error:
+                self._on_write_error(error)
+                return False
             count = self._writer.message_count
         entry.received += 1
         sequence = info.get("publication_sequence_number")
@@ -339,12 +357,19 @@ class RecorderNode(Node):
         try:
             for out in self._tf.feed(entry.name, entry.type_name, data, received):
                 write_tf(self._writer, out)
+        except RecordingWriteError:
+            raise  # the disk, not the synthesis: the recording ends
         except Exception as error:  # noqa: BLE001 - the recording itself must go on
             self._tf_note = f"TF synthesis stopped at a {entry.name} message: {type(error).__name__}: {error}"
             self._tf = None
             self.get_logger().error(self._tf_note)
 
     # -- end ---------------------------------------------------------------------------------
+
+    @property
+    def write_failed(self) -> bool:
+        """True when the disk failed: the recording ended early (exit code 1)."""
+        return self._write_error is not None
 
     def dropped_messages(self) -> dict[str, int]:
         """Per topic: messages known lost.
@@ -365,7 +390,11 @@ class RecorderNode(Node):
         for entry in self._topics.values():
             entry.intake.destroy(self)
         with self._lock:
-            summary = self._writer.close()
+            try:
+                summary = self._writer.close()
+            except RecordingWriteError as error:
+                self._on_write_error(error)
+                summary = self._writer.close()  # what the file keeps
             dropped = self.dropped_messages()
             total = sum(dropped.values())
             dropped_text = (
@@ -380,14 +409,17 @@ class RecorderNode(Node):
         return self._finished_line
 
 
-def _finish(node: Node) -> None:
-    line = node.finish()  # type: ignore[attr-defined]
-    print(f"recorder: {line}", file=sys.stderr, flush=True)
-
-
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``recorder`` executable."""
-    return run_node(RecorderNode, USAGE, argv, on_shutdown=_finish)
+    """Entry point of the ``recorder`` executable: exit 1 when the disk failed (the file keeps what was flushed)."""
+    failed = []
+
+    def finish(node: RecorderNode) -> None:
+        line = node.finish()
+        print(f"recorder: {line}", file=sys.stderr, flush=True)
+        failed.append(node.write_failed)
+
+    code = run_node(RecorderNode, USAGE, argv, on_shutdown=finish)
+    return 1 if code == 0 and any(failed) else code
 
 
 if __name__ == "__main__":

@@ -7,10 +7,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
+from manip_kin.recording.chunks import ChunkError, mapped, parse_chunk, walk
 from manip_kin.recording.errors import CorruptRecordingError, RecordingError
 from manip_kin.recording.files import DECODE_ERRORS, check_complete, recording_files, salvage_hint
 from manip_kin.recording.metadata import MCAP_METADATA_KEY, MCAP_METADATA_NAME
@@ -146,12 +147,18 @@ class RecordingInfo:
 
 
 def _iso(ns: int) -> str:
-    moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.UTC)
+    try:
+        moment = datetime.datetime.fromtimestamp(ns / 1e9, tz=datetime.UTC)
+    except (ValueError, OverflowError, OSError):  # a damaged time beyond the calendar
+        return f"{ns} ns (not a calendar date)"
     return moment.isoformat(timespec="microseconds").replace("+00:00", "Z")
 
 
 def _human_time(ns: int) -> str:
-    moment = datetime.datetime.fromtimestamp(ns // 1_000_000_000).astimezone()
+    try:
+        moment = datetime.datetime.fromtimestamp(ns // 1_000_000_000).astimezone()
+    except (ValueError, OverflowError, OSError):
+        return f"{ns} ns (not a calendar date)"
     return f"{moment:%b %d %Y %H:%M:%S}.{ns % 1_000_000_000:09d} ({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
 
 
@@ -172,8 +179,66 @@ def _size_on_disk(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
+def _ros_distro(serialized_metadata: str, file_path: Path) -> str:
+    """``ros_distro`` of the rosbag2 metadata record ('' when it has none); YAML within the caps."""
+    from manip_kin.errors import ModelFileError
+    from manip_kin.robot_files import parse_yaml
+
+    try:
+        document = parse_yaml(serialized_metadata, f"{file_path} rosbag2 metadata record")
+    except ModelFileError as error:
+        raise CorruptRecordingError(f"{error}; {salvage_hint(file_path)}") from None
+    distro = document.get("ros_distro", "") if isinstance(document, dict) else ""
+    return distro if isinstance(distro, str) else ""
+
+
+@dataclass(frozen=True)
+class _FileTotals:
+    """One file's channels, schemas, message counts per channel id, times and chunk compressions."""
+
+    channels: dict[int, Channel]
+    schemas: dict[int, Schema]
+    counts: dict[int, int]
+    start_ns: int
+    end_ns: int
+    compressions: list[str]
+
+
+def _file_totals(reader: SeekingReader, data) -> _FileTotals:
+    """From the summary section; a file without one (ended on a full disk) is scanned record by record."""
+    summary = reader.get_summary()
+    if summary is not None and summary.statistics is not None:
+        stats = summary.statistics
+        return _FileTotals(
+            dict(summary.channels),
+            dict(summary.schemas),
+            dict(stats.channel_message_counts),
+            stats.message_start_time,
+            stats.message_end_time,
+            [index.compression or "none" for index in summary.chunk_indexes],
+        )
+    channels: dict[int, Channel] = {}
+    schemas: dict[int, Schema] = {}
+    counts: dict[int, int] = {}
+    times: list[int] = []
+    compressions: list[str] = []
+    for _, opcode, body, records in walk(data):
+        if opcode == Opcode.CHUNK:
+            compressions.append(parse_chunk(body).compression or "none")
+        for record in records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            else:
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                times.append(record.log_time)
+    return _FileTotals(channels, schemas, counts, min(times, default=0), max(times, default=0), compressions)
+
+
 def read_info(path: str | Path) -> RecordingInfo:
-    """Summarize a recording from its summary sections (no message is decoded).
+    """Summarize a recording from its summary sections (no message is decoded); a file without
+    one (ended on a full disk) is scanned record by record.
 
     Raises:
         RecordingError: path missing or not a recording.
@@ -188,36 +253,33 @@ def read_info(path: str | Path) -> RecordingInfo:
     for file_path in files:
         check_complete(file_path)
         try:
-            with open(file_path, "rb") as stream:
-                reader = SeekingReader(stream, record_size_limit=file_path.stat().st_size)
+            with mapped(file_path) as stream:
+                reader = SeekingReader(stream, record_size_limit=len(stream))
                 header = reader.get_header()
                 profile, library = header.profile, header.library
-                summary = reader.get_summary()
-                if summary is None or summary.statistics is None:
-                    raise CorruptRecordingError(f"{file_path} has no summary statistics; {salvage_hint(file_path)}")
-                stats = summary.statistics
-                for channel_id, channel in summary.channels.items():
-                    schema = summary.schemas.get(channel.schema_id)
-                    count = stats.channel_message_counts.get(channel_id, 0)
+                totals = _file_totals(reader, stream)
+                for channel_id, channel in totals.channels.items():
+                    schema = totals.schemas.get(channel.schema_id)
+                    count = totals.counts.get(channel_id, 0)
                     info = _channel_topic_info(channel, schema, count)
                     if channel.topic in topics:
                         previous = topics[channel.topic]
                         info = TopicInfo(**{**previous.__dict__, "message_count": previous.message_count + count})
                     topics[channel.topic] = info
-                if stats.message_count:
-                    start_ns = (
-                        stats.message_start_time if not message_count else min(start_ns, stats.message_start_time)
-                    )
-                    end_ns = max(end_ns, stats.message_end_time)
-                message_count += stats.message_count
-                chunk_count += len(summary.chunk_indexes)
-                compressions.update(ci.compression or "none" for ci in summary.chunk_indexes)
+                file_count = sum(totals.counts.values())
+                if file_count:
+                    start_ns = totals.start_ns if not message_count else min(start_ns, totals.start_ns)
+                    end_ns = max(end_ns, totals.end_ns)
+                message_count += file_count
+                chunk_count += len(totals.compressions)
+                compressions.update(totals.compressions)
                 for record in reader.iter_metadata():
                     if record.name == MCAP_METADATA_NAME and MCAP_METADATA_KEY in record.metadata:
-                        document = yaml.safe_load(record.metadata[MCAP_METADATA_KEY]) or {}
-                        ros_distro = str(document.get("ros_distro", "") or ros_distro)
-        except CorruptRecordingError:
-            raise
+                        ros_distro = _ros_distro(record.metadata[MCAP_METADATA_KEY], file_path) or ros_distro
+        except CorruptRecordingError as error:
+            if not isinstance(error, ChunkError):
+                raise
+            raise CorruptRecordingError(f"{file_path} is damaged ({error}); {salvage_hint(file_path)}") from None
         except DECODE_ERRORS as error:
             raise CorruptRecordingError(
                 f"{file_path} is damaged ({type(error).__name__}: {error}); {salvage_hint(file_path)}"

@@ -185,32 +185,37 @@ def parse_profiles(text_or_list: str | Sequence[dict] | None) -> OfferedProfiles
     if not text_or_list:
         return OfferedProfiles()
     if isinstance(text_or_list, str):
-        try:
-            items = yaml.safe_load(text_or_list)
-        except yaml.YAMLError as error:
-            raise RecordingError(f"offered_qos_profiles is not valid YAML: {error}") from None
+        from manip_kin.errors import ModelFileError
+        from manip_kin.robot_files import parse_yaml
+
+        try:  # a recording's text: parsed within the YAML caps (no alias bombs)
+            items = parse_yaml(text_or_list, "offered_qos_profiles")
+        except ModelFileError as error:
+            raise RecordingError(f"offered_qos_profiles is not valid YAML: {error.field}: {error.problem}") from None
     else:
         items = text_or_list
     if not items:
         return OfferedProfiles()
     if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
         raise RecordingError(f"offered_qos_profiles must be a list of QoS mappings, got {type(items).__name__}")
-    profiles = []
-    for item in items:
-        profiles.append(
-            QosProfileRecord(
-                history=_policy(item.get("history", 3), HISTORY_NAMES),
-                depth=int(item.get("depth", 0)),
-                reliability=_policy(item.get("reliability", 3), RELIABILITY_NAMES),
-                durability=_policy(item.get("durability", 3), DURABILITY_NAMES),
-                deadline_ns=_duration_ns(item.get("deadline")),
-                lifespan_ns=_duration_ns(item.get("lifespan")),
-                liveliness=_policy(item.get("liveliness", 4), LIVELINESS_NAMES),
-                liveliness_lease_duration_ns=_duration_ns(item.get("liveliness_lease_duration")),
-                avoid_ros_namespace_conventions=bool(item.get("avoid_ros_namespace_conventions", False)),
-            )
-        )
-    return OfferedProfiles(tuple(profiles))
+    try:
+        return OfferedProfiles(tuple(_profile(item) for item in items))
+    except (TypeError, ValueError, OverflowError, AttributeError) as error:
+        raise RecordingError(f"offered_qos_profiles holds a value of the wrong type ({error})") from None
+
+
+def _profile(item: dict) -> QosProfileRecord:
+    return QosProfileRecord(
+        history=_policy(item.get("history", 3), HISTORY_NAMES),
+        depth=int(item.get("depth", 0)),
+        reliability=_policy(item.get("reliability", 3), RELIABILITY_NAMES),
+        durability=_policy(item.get("durability", 3), DURABILITY_NAMES),
+        deadline_ns=_duration_ns(item.get("deadline")),
+        lifespan_ns=_duration_ns(item.get("lifespan")),
+        liveliness=_policy(item.get("liveliness", 4), LIVELINESS_NAMES),
+        liveliness_lease_duration_ns=_duration_ns(item.get("liveliness_lease_duration")),
+        avoid_ros_namespace_conventions=bool(item.get("avoid_ros_namespace_conventions", False)),
+    )
 
 
 def default_offer(transient_local: bool = False, depth: int = 10) -> OfferedProfiles:

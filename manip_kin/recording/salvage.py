@@ -5,11 +5,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
-from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.opcode import Opcode
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Message, Schema
 
+from manip_kin.recording.chunks import chunk_records, mapped, parse_chunk, record_at, top_level_records
 from manip_kin.recording.errors import CorruptRecordingError, RecordingError
 from manip_kin.recording.files import DECODE_ERRORS, MCAP_MAGIC, recording_files
 from manip_kin.recording.qos import parse_profiles
@@ -71,30 +73,15 @@ class SalvageReport:
         }
 
 
-class _TrackedStream:
-    """A read-only file wrapper that remembers how far it was read."""
-
-    def __init__(self, stream: BinaryIO):
-        self._stream = stream
-        self.position = 0
-
-    def read(self, size: int = -1) -> bytes:
-        data = self._stream.read(size)
-        self.position += len(data)
-        return data
-
-    def readinto(self, buffer: Any) -> int:
-        count = self._stream.readinto(buffer)
-        self.position += count or 0
-        return count
-
-
 def salvage(source: str | Path, output: str | Path, compression: str = "zstd") -> SalvageReport:
-    """Copy every complete, CRC-valid chunk of a (possibly truncated) recording into a new file.
+    """Copy every complete, CRC-valid chunk of a (possibly truncated or damaged) recording into a new file.
 
-    Reads records front to back and stops at the first one that is cut off or
-    damaged, so what a killed recorder had flushed is recovered and the
-    partially written tail is dropped.
+    Reads records front to back. After a record that is cut off or damaged it resynchronises
+    on the next chunk that parses, decompresses (within :mod:`.chunks`' bounds) and matches
+    its CRC, so the chunks after a damaged one are recovered too; the partially written
+    tail of a killed recorder is dropped. Channels and schemas come from the records read
+    and, when the file's summary is readable, from the summary as well (a chunk after the
+    damage may use a channel first defined in the damaged one).
 
     Args:
         source: a ``.mcap`` file or bag directory, complete or not.
@@ -155,39 +142,61 @@ def _salvage_file(path: Path, writer: Any, report: SalvageReport) -> None:
         report.complete = False
         report.stop_reason = str(error)
         return
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    with open(path, "rb") as raw_stream:
-        stream = _TrackedStream(raw_stream)
-        reader = StreamReader(stream, emit_chunks=True, record_size_limit=size)
-        good_until = 0
-        reached_footer = False
+    with mapped(path) as data:
+        schemas, channels = _summary_definitions(data)
+        offset, reached_footer, damaged = len(MCAP_MAGIC), False, []
+        while offset < len(data) and not reached_footer:
+            try:
+                opcode, body, next_offset = record_at(data, offset)
+                records = top_level_records(opcode, body)
+            except DECODE_ERRORS as error:
+                detail = f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
+                resume = next_valid_chunk(data, offset + 1)
+                damaged.append(f"byte {offset}: {detail}")
+                if resume is None:
+                    break
+                offset = resume
+                continue
+            for item in records:
+                if isinstance(item, Schema):
+                    schemas[item.id] = item
+                elif isinstance(item, Channel):
+                    channels[item.id] = item
+                elif isinstance(item, Message):
+                    _copy_message(item, schemas, channels, writer)
+            report.bytes_read += next_offset - offset
+            reached_footer = opcode == Opcode.FOOTER
+            offset = next_offset
+    if damaged or not reached_footer:
+        report.complete = False
+        first = f"cut off or damaged record ({damaged[0]})" if damaged else "end of file before the footer"
+        more = f"; {len(damaged) - 1} more damaged regions skipped" if len(damaged) > 1 else ""
+        report.stop_reason = report.stop_reason or first + more
+
+
+def next_valid_chunk(data, start: int) -> int | None:
+    """Offset of the first chunk record at or after ``start`` that parses and checks out, or None."""
+    chunk_opcode = bytes([Opcode.CHUNK])
+    position = start
+    while (position := data.find(chunk_opcode, position)) >= 0:
         try:
-            for record in reader.records:
-                records: list[Any]
-                if isinstance(record, Chunk):
-                    records = breakup_chunk(record, validate_crc=bool(record.uncompressed_crc))
-                else:
-                    records = [record]
-                for item in records:
-                    if isinstance(item, Schema):
-                        schemas[item.id] = item
-                    elif isinstance(item, Channel):
-                        channels[item.id] = item
-                    elif isinstance(item, Message):
-                        _copy_message(item, schemas, channels, writer)
-                good_until = stream.position
-                if type(record).__name__ == "Footer":
-                    reached_footer = True
-        except DECODE_ERRORS as error:
-            report.complete = False
-            detail = f"{type(error).__name__}: {error}" if str(error) else type(error).__name__
-            report.stop_reason = f"cut off or damaged record ({detail})"
-        else:
-            if not reached_footer:
-                report.complete = False
-                report.stop_reason = "end of file before the footer"
-        report.bytes_read += good_until
+            opcode, body, _ = record_at(data, position)
+            chunk_records(parse_chunk(body))
+            return position
+        except DECODE_ERRORS:
+            position += 1
+    return None
+
+
+def _summary_definitions(data) -> tuple[dict[int, Schema], dict[int, Channel]]:
+    """Schemas and channels of the file's summary, when it has a readable one; else empty."""
+    try:
+        summary = SeekingReader(data, record_size_limit=len(data)).get_summary()
+    except DECODE_ERRORS:
+        return {}, {}
+    if summary is None:
+        return {}, {}
+    return dict(summary.schemas), dict(summary.channels)
 
 
 def _copy_message(message: Message, schemas: dict[int, Schema], channels: dict[int, Channel], writer: Any) -> None:

@@ -35,6 +35,7 @@ from manip_kin.recording.msgdef import (
 from manip_kin.recording.output_layout import OutputLayout, resolve_output
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.summary import RecordingSummary, format_bytes
+from manip_kin.recording.write_failure import DiskGuard, RecordingWriteError
 
 # Names other modules import from here.
 __all__ = [
@@ -115,14 +116,16 @@ class RecordingWriter:
         self.layout = resolve_output(output, overwrite=overwrite)
         self.compression = compression
         self._flush_interval_s = flush_interval_s
-        self._file = open(self.layout.mcap_path, "wb")  # noqa: SIM115 - closed in close()
+        self._disk = DiskGuard(self.layout.mcap_path)
+        self._file = self._disk.stream
         self._mcap = McapWriter(
             self._file,
             chunk_size=chunk_size,
             compression=_COMPRESSIONS[compression],
         )
-        self._mcap.start(profile=MCAP_PROFILE, library=f"manip_kin {__version__}; mcap-python")
-        self._file.flush()
+        with self._disk.guard():
+            self._mcap.start(profile=MCAP_PROFILE, library=f"manip_kin {__version__}; mcap-python")
+            self._file.flush()
         self._schemas: dict[str, int] = {}
         self._definitions: dict[str, Any] = {}
         self._layouts: dict[str, CdrLayout] = {}
@@ -231,6 +234,8 @@ class RecordingWriter:
             raise RecordingError(f"topic {topic!r} is not registered; registered: {', '.join(self._topics) or 'none'}")
         if self._summary is not None:
             raise RecordingError(f"recording {self.layout.mcap_path} is closed")
+        if self._disk.failure is not None:
+            raise self._disk.failure
         if publish_time_ns is None:
             stamp = header_stamp_ns(data) if entry.header_first else None
             if stamp is not None:
@@ -238,13 +243,15 @@ class RecordingWriter:
             else:
                 publish_time_ns = source_time_ns if source_time_ns else log_time_ns
         entry.sequence += 1
-        self._mcap.add_message(
-            channel_id=entry.channel_id,
-            log_time=log_time_ns,
-            data=data,
-            publish_time=publish_time_ns,
-            sequence=entry.sequence,
-        )
+        written_before = self._file.flushed_end
+        with self._disk.guard(kept_if_written=self._message_count + 1):
+            self._mcap.add_message(
+                channel_id=entry.channel_id,
+                log_time=log_time_ns,
+                data=data,
+                publish_time=publish_time_ns,
+                sequence=entry.sequence,
+            )
         entry.message_count += 1
         if self._message_count == 0:
             self._start_ns = self._end_ns = log_time_ns
@@ -252,6 +259,8 @@ class RecordingWriter:
             self._start_ns = min(self._start_ns, log_time_ns)
             self._end_ns = max(self._end_ns, log_time_ns)
         self._message_count += 1
+        if self._file.flushed_end != written_before:  # a full chunk, this message included, went out
+            self._disk.kept_messages = self._message_count
         self._message_bytes += len(data)
         self._pending = True
         self.flush_if_due()
@@ -295,8 +304,10 @@ class RecordingWriter:
 
     def flush(self) -> None:
         """Finish the current chunk and hand everything written so far to the OS."""
-        if self._summary is None:
-            self._mcap.flush()
+        if self._summary is None and self._disk.failure is None:
+            with self._disk.guard(kept_if_written=self._message_count):
+                self._mcap.flush()
+            self._disk.kept_messages = self._message_count
             self._pending = False
             self._last_flush = time.monotonic()
 
@@ -328,10 +339,25 @@ class RecordingWriter:
     def close(self) -> RecordingSummary:
         """Finish the file (rosbag2 metadata record, summary, footer) and ``metadata.yaml``.
 
-        Calling it again returns the same summary.
+        Calling it again returns the same summary. After a disk failure (raised once, by the
+        write or flush that met it) it returns what the file keeps: the flushed messages.
+
+        Raises:
+            RecordingWriteError: the disk fails while finishing; the file keeps what was
+                flushed before (see :mod:`.write_failure`).
         """
         if self._summary is not None:
             return self._summary
+        if self._disk.failure is not None:
+            return self._kept_summary()
+        try:
+            return self._complete()
+        except OSError as error:
+            failure = self._disk.fail(error)
+            self._kept_summary()
+            raise failure from None
+
+    def _complete(self) -> RecordingSummary:
         relative_path = self.layout.mcap_path.name
         metadata = bag_metadata.bag_metadata(
             self.topic_summaries(),
@@ -346,17 +372,36 @@ class RecordingWriter:
         )
         self._mcap.finish()
         self._file.close()
+        self._disk.kept_messages = self._message_count
         if self.layout.bag_directory is not None:
-            (self.layout.bag_directory / bag_metadata.METADATA_FILENAME).write_text(
-                bag_metadata.metadata_yaml(metadata), encoding="utf-8"
-            )
+            try:
+                (self.layout.bag_directory / bag_metadata.METADATA_FILENAME).write_text(
+                    bag_metadata.metadata_yaml(metadata), encoding="utf-8"
+                )
+            except OSError as error:  # the .mcap is complete: readers find it without metadata.yaml
+                self._disk.failure = RecordingWriteError(
+                    f"writing {self.layout.bag_directory / bag_metadata.METADATA_FILENAME} failed: "
+                    f"{error.strerror or error}; {self.layout.mcap_path} is complete"
+                )
+                raise self._disk.failure from None
+        return self._kept_summary()
+
+    # -- a failing disk ------------------------------------------------------------------------
+
+    @property
+    def failure(self) -> RecordingWriteError | None:
+        """The disk failure that ended the recording, or None."""
+        return self._disk.failure
+
+    def _kept_summary(self) -> RecordingSummary:
+        """The summary of what the file keeps: every message once complete, the flushed ones after a failure."""
         self._summary = RecordingSummary(
             path=self.layout.bag_directory or self.layout.mcap_path,
             mcap_path=self.layout.mcap_path,
             topic_counts={t.name: t.message_count for t in self._topics.values()},
-            message_count=self._message_count,
+            message_count=self._disk.kept_messages,
             message_bytes=self._message_bytes,
-            file_bytes=self.layout.mcap_path.stat().st_size,
+            file_bytes=self.layout.mcap_path.stat().st_size if self.layout.mcap_path.exists() else 0,
             start_ns=self._start_ns,
             end_ns=self._end_ns,
         )

@@ -27,7 +27,11 @@ where no child, or more than one child, leads on to a movable joint. For the Fra
 example-robot-data this stops at ``panda_hand``, where the two finger joints branch off,
 so the model is the 7-DoF arm with ``ee`` at the hand flange (no fingers, no TCP). When the
 tree branches into several movable chains before any movable joint (two arms on one base),
-there is no default: the error lists the candidate tips and says to set ``tip_link``. For
+there is no default: the error lists the candidate tips and says to set ``tip_link``.
+A gripper joint at the end of the default chain is left out: a movable joint whose name or
+child link name contains ``gripper``, ``finger``, ``jaw`` or ``claw`` and below which
+nothing moves (the Unitree Z1's single ``jointGripper``); the tip is then its parent link
+(``gripperStator`` for the Z1, a 6-DoF arm). Name a tip below it to include it. For
 the Panda TCP and the UR5 tool flange, name the tip::
 
     panda = load_urdf("panda.urdf", tip_link="panda_hand_tcp")

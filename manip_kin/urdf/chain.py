@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_kin.errors import ModelFileError
 from manip_kin.model import Joint, JointType, RobotModel
+from manip_kin.robot_files import read_robot_file
 from manip_kin.urdf.document import MOVABLE_TYPES, UrdfJoint, UrdfTree
 
 # What the movable URDF joint types become in the model.
@@ -161,8 +161,5 @@ def load_urdf(
     Errors name ``path`` as the source.
     """
     path = Path(path)
-    try:
-        text = path.read_bytes()
-    except OSError as error:
-        raise ModelFileError(str(path), "<file>", f"cannot read: {error.strerror}") from None
+    text = read_robot_file(path)
     return _build_model(UrdfTree(text, str(path)), base_link, tip_link, tool_link, name)

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.errors import ModelFileError
+from manip_kin.errors import ModelFileError, bounded_repr
+from manip_kin.robot_files import MAX_MAGNITUDE, parse_xml
 from manip_kin.rotations import transform_from_xyz_rpy
 
 #: Element written by :func:`manip_kin.urdf.model_to_urdf` naming its chain (``tip_link``,
@@ -40,26 +41,34 @@ class UrdfJoint:
     has_mimic: bool
 
 
+#: Name parts that make a leaf movable joint a gripper joint, left out of the default chain.
+GRIPPER_NAME_PARTS = ("gripper", "finger", "jaw", "claw")
+
+
+def is_gripper_joint(joint: UrdfJoint) -> bool:
+    """True when the joint's or its child link's name contains a :data:`GRIPPER_NAME_PARTS` word."""
+    names = f"{joint.name} {joint.child}".lower()
+    return any(part in names for part in GRIPPER_NAME_PARTS)
+
+
 class UrdfTree:
     """Parses one URDF document; every error names the source and the field."""
 
     def __init__(self, xml_text: str | bytes, source: str):
         self.source = source
-        try:
-            self.root = ET.fromstring(xml_text)
-        except ET.ParseError as error:
-            line, column = error.position  # expat counts columns from 0, editors from 1
-            problem = f"malformed XML: {str(error).split(':')[0]}"
-            raise ModelFileError(source, f"line {line}, column {column + 1}", problem) from None
+        self.root = parse_xml(xml_text, source)  # bounded size, depth and element count
         if self.root.tag != "robot":
             raise self.fail("robot", f"the root element is <{self.root.tag}>; a URDF starts with <robot>")
         self.links = self._read_links()
+        self._link_set = frozenset(self.links)
         self.joints = [self._read_joint(element, i) for i, element in enumerate(self.root.findall("joint"))]
         self.parent_joint: dict[str, UrdfJoint] = {}
         self.child_joints: dict[str, list[UrdfJoint]] = {name: [] for name in self.links}
         self._link_joints()
+        self._check_acyclic()
+        self._movable_below: dict[str, bool] = {}
         hint = self.root.find(CHAIN_HINT_ELEMENT)
-        self.chain_hint = {} if hint is None else {k: v for k, v in hint.attrib.items() if v in self.links}
+        self.chain_hint = {} if hint is None else {k: v for k, v in hint.attrib.items() if v in self._link_set}
 
     def fail(self, field: str, problem: str) -> ModelFileError:
         return ModelFileError(self.source, field, problem)
@@ -67,15 +76,15 @@ class UrdfTree:
     # --- elements
 
     def _read_links(self) -> list[str]:
-        names: list[str] = []
+        names: dict[str, None] = {}  # ordered, and a linear-time membership test
         for index, element in enumerate(self.root.findall("link")):
             name = element.get("name", "").strip()
             if not name:
                 raise self.fail(f"link[#{index + 1}]@name", "missing; every <link> needs a name")
             if name in names:
-                raise self.fail(f"link[{name}]@name", "two <link> elements have this name")
-            names.append(name)
-        return names
+                raise self.fail(f"link[{name[:80]}]@name", "two <link> elements have this name")
+            names[name] = None
+        return list(names)
 
     def _read_joint(self, element: ET.Element, index: int) -> UrdfJoint:
         name = element.get("name", "").strip()
@@ -90,7 +99,7 @@ class UrdfTree:
         axis_element = element.find("axis")
         if axis_element is not None:
             axis = self.numbers(axis_element, "xyz", f"{where}/axis@xyz", default=(1.0, 0.0, 0.0))
-            norm = float(np.linalg.norm(axis))
+            norm = float(np.linalg.norm(axis))  # components are capped: no overflow
             if norm < 1e-12 and joint_type in MOVABLE_TYPES:
                 raise self.fail(f"{where}/axis@xyz", "has zero length; valid: a non-zero direction")
             axis = axis / norm if norm >= 1e-12 else np.array([1.0, 0.0, 0.0])
@@ -100,7 +109,9 @@ class UrdfTree:
             for attribute in ("lower", "upper", "velocity", "effort"):
                 if limit_element.get(attribute) is not None:
                     field = f"{where}/limit@{attribute}"
-                    limit[attribute] = self._number(limit_element.get(attribute), field, allow_infinite=True)
+                    value = self._number(limit_element.get(attribute), field, allow_infinite=True)
+                    # URDFs write ±1e16 for "no limit": beyond the cap a limit is infinite.
+                    limit[attribute] = value if abs(value) <= MAX_MAGNITUDE else math.copysign(math.inf, value)
         return UrdfJoint(
             name=name,
             type=joint_type,
@@ -117,8 +128,8 @@ class UrdfTree:
         name = "" if reference is None else reference.get("link", "").strip()
         if not name:
             raise self.fail(f"{where}/{tag}@link", f'missing; a joint needs <{tag} link="..."/>')
-        if name not in self.links:
-            raise self.fail(f"{where}/{tag}@link", f"{name!r} is not a <link> of this robot")
+        if name not in self._link_set:
+            raise self.fail(f"{where}/{tag}@link", f"{bounded_repr(name)} is not a <link> of this robot")
         return name
 
     def origin(self, element: ET.Element, where: str) -> np.ndarray:
@@ -141,7 +152,7 @@ class UrdfTree:
         return np.array([self._number(part, field, allow_infinite=False, whole=text) for part in parts])
 
     def _number(self, text: str, field: str, allow_infinite: bool, whole: str | None = None) -> float:
-        shown = repr(whole if whole is not None else text)
+        shown = bounded_repr(whole if whole is not None else text)
         try:
             value = float(text)
         except ValueError:
@@ -149,6 +160,8 @@ class UrdfTree:
             raise self.fail(field, f"{shown} is not numeric{hint}") from None
         if math.isnan(value) or (math.isinf(value) and not allow_infinite):
             raise self.fail(field, f"{shown} is not a finite number")
+        if not allow_infinite and abs(value) > MAX_MAGNITUDE:
+            raise self.fail(field, f"{shown} is out of range; valid: |value| <= {MAX_MAGNITUDE:g} (m, rad, axis)")
         return value
 
     # --- tree
@@ -165,8 +178,29 @@ class UrdfTree:
                     f"joint[{joint.name}]/child@link",
                     f"link {joint.child!r} is already the child of joint {other!r}; URDF is a tree",
                 )
+            if joint.child == joint.parent:
+                raise self.fail(
+                    f"joint[{joint.name}]/child@link",
+                    f"link {joint.child!r} is both parent and child of this joint; URDF is a tree",
+                )
             self.parent_joint[joint.child] = joint
             self.child_joints[joint.parent].append(joint)
+
+    def _check_acyclic(self) -> None:
+        """Every link below a root link: a link that is not lies on a cycle of joints."""
+        reached = set()
+        pending = [name for name in self.links if name not in self.parent_joint]
+        while pending:
+            link = pending.pop()
+            reached.add(link)
+            pending.extend(joint.child for joint in self.child_joints[link])
+        for name in self.links:
+            if name not in reached:
+                joint = self.parent_joint[name]
+                raise self.fail(
+                    f"joint[{joint.name}]/child@link",
+                    f"link {name!r} lies on a cycle of joints (it is its own ancestor); URDF is a tree",
+                )
 
     def root_link(self) -> str:
         roots = [name for name in self.links if name not in self.parent_joint]
@@ -176,21 +210,29 @@ class UrdfTree:
         return roots[0]
 
     def check_link(self, name: str, field: str) -> str:
-        if name not in self.links:
-            raise self.fail(field, f"unknown link {name!r}; links: {', '.join(self.links)}")
+        if name not in self._link_set:
+            shown = ", ".join(self.links[:20]) + (f" ... ({len(self.links)} links)" if len(self.links) > 20 else "")
+            raise self.fail(field, f"unknown link {bounded_repr(name)}; links: {shown}")
         return name
 
     def _leads_to_movable(self, joint: UrdfJoint) -> bool:
-        """True when ``joint`` or a joint below it is not fixed."""
-        pending, seen = [joint], set()
-        while pending:
-            current = pending.pop()
-            if current.type != "fixed":
-                return True
-            if current.name not in seen:  # a malformed file may hold a cycle
-                seen.add(current.name)
-                pending.extend(self.child_joints[current.child])
-        return False
+        """True when ``joint`` or a joint below it is not fixed (memoised: linear over the tree)."""
+        known = self._movable_below
+        if joint.name not in known:
+            # Post-order over the subtree without recursion; the tree is acyclic (checked).
+            pending = [(joint, False)]
+            while pending:
+                current, expanded = pending.pop()
+                if current.name in known:
+                    continue
+                children = self.child_joints[current.child]
+                if expanded or current.type != "fixed" or not children:
+                    below = any(known[child.name] for child in children) if expanded else False
+                    known[current.name] = current.type != "fixed" or below
+                    continue
+                pending.append((current, True))
+                pending.extend((child, False) for child in children if child.name not in known)
+        return known[joint.name]
 
     def _walk_unbranched(self, link: str) -> tuple[str, list[UrdfJoint]]:
         """From ``link``, follow the only child joint (the only one leading on to a movable
@@ -225,7 +267,23 @@ class UrdfTree:
                 f"default tip; set the tip link (node parameter tip_link, CLI --tip-link) to one of "
                 f"{', '.join(repr(c) for c in candidates)} or a link below one of them",
             )
-        return tip
+        return self._without_gripper(base, tip)
+
+    def _without_gripper(self, base: str, tip: str) -> str:
+        """``tip``, or the parent link of the trailing gripper joints of the chain (see :mod:`manip_kin.urdf`).
+
+        A gripper joint is a movable joint named (joint or child link) like a gripper or finger,
+        with nothing movable below it: a leaf of the tree, as the Unitree Z1's ``jointGripper``.
+        At least one movable joint stays.
+        """
+        while True:
+            movable = [joint for joint in self.chain(base, tip, "tip_link") if joint.type != "fixed"]
+            last = movable[-1] if movable else None
+            if last is None or len(movable) < 2 or not is_gripper_joint(last):
+                return tip
+            if any(self._leads_to_movable(child) for child in self.child_joints[last.child]):
+                return tip
+            tip = last.parent
 
     def chain(self, base: str, tip: str, field: str) -> list[UrdfJoint]:
         """The joints from ``base`` down to ``tip``, base first."""
