@@ -59,6 +59,16 @@ def read_robot_file(path: str | Path) -> bytes:
     return data
 
 
+def is_urdf_file(path: str | Path) -> bool:
+    """True when the file at ``path`` holds a URDF (by its content, see :func:`robot_file_kind`);
+    False for a YAML robot or a file that cannot be read."""
+    try:
+        with open(path, "rb") as stream:
+            return robot_file_kind(stream.read(4096)) == "urdf"
+    except OSError:
+        return False
+
+
 def robot_file_kind(data: bytes | str) -> str:
     """``"urdf"`` when the content is XML (starts with ``<`` after a BOM and blanks), else ``"yaml"``."""
     head = data[:4096].encode("utf-8", "replace") if isinstance(data, str) else data[:4096]

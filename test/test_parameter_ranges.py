@@ -6,6 +6,7 @@ tested here as it is declared.
 """
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -78,7 +79,9 @@ def test_values_just_outside_the_range_are_refused_and_the_bounds_taken(spec):
     for value in (below, above):
         if spec.zero_is_off and value == 0:
             continue
-        with pytest.raises(InvalidArgumentError, match=f"parameter {spec.name} = .*; valid: .*{high:g}"):
+        with pytest.raises(
+            InvalidArgumentError, match=f"parameter {spec.name} = .*; valid: .*{re.escape(f'{high:g}')}"
+        ):
             spec.coerce(as_value(value))
 
 

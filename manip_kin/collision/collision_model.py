@@ -17,7 +17,7 @@ from manip_kin.collision.pairs import DEFAULT_SAMPLES, PairSelection, sampled_di
 from manip_kin.collision.srdf import load_disabled_pairs
 from manip_kin.errors import ModelFileError
 from manip_kin.model import RobotModel
-from manip_kin.robots import is_urdf_path
+from manip_kin.robot_files import is_urdf_file
 from manip_kin.urdf.document import UrdfTree
 
 
@@ -98,7 +98,7 @@ def load_collision_model(
             malformed SRDF or one naming links the robot does not have.
     """
     if urdf is None:
-        if not (model.source and is_urdf_path(model.source) and Path(model.source).is_file()):
+        if not (model.source and Path(model.source).is_file() and is_urdf_file(model.source)):
             raise ModelFileError(
                 model.source or model.name,
                 "<collision>",

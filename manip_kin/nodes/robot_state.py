@@ -45,7 +45,8 @@ from manip_kin.nodes.scene_messages import apply_marker_array
 from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.nodes.visuals import RobotVisuals
 from manip_kin.plant import KinematicPlant
-from manip_kin.robots import bundled_robot_names, is_urdf_path, resolve_robot_path
+from manip_kin.robot_files import is_urdf_file
+from manip_kin.robots import bundled_robot_names, resolve_robot_path
 from manip_kin.scene import Scene
 from manip_kin.urdf import model_to_urdf, with_chain_hint
 
@@ -237,10 +238,10 @@ class RobotStateNode(LoopingNode):
     def _description_text(self, params: dict) -> str:
         """The URDF to publish: the file as given, as robot_state_publisher does (with one element naming the
         chain when ``tip_link``/``tool_link`` chose it), or one generated from a robot YAML."""
-        self._from_urdf = bool(params["robot"]) and is_urdf_path(params["robot"])
+        path = resolve_robot_path(params["robot"]) if params["robot"] else None
+        self._from_urdf = path is not None and is_urdf_file(path)
         if not self._from_urdf:
             return model_to_urdf(self.model)
-        path = resolve_robot_path(params["robot"])
         text = path.read_text(encoding="utf-8", errors="replace")
         if params["tip_link"] or params["tool_link"]:
             from manip_kin.urdf.document import UrdfTree

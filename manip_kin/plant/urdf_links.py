@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.rotations import transform_from_xyz_rpy
 from manip_kin.urdf.document import UrdfTree
 
 
@@ -50,12 +49,7 @@ class LinkDynamics:
 
 
 def _origin(reader: UrdfTree, element: ET.Element | None, where: str) -> np.ndarray:
-    origin = None if element is None else element.find("origin")
-    if origin is None:
-        return np.eye(4)
-    xyz = reader._numbers(origin, "xyz", f"{where}/origin@xyz", default=(0.0, 0.0, 0.0))
-    rpy = reader._numbers(origin, "rpy", f"{where}/origin@rpy", default=(0.0, 0.0, 0.0))
-    return transform_from_xyz_rpy(xyz, rpy)
+    return np.eye(4) if element is None else reader.origin(element, where)
 
 
 def _positive(reader: UrdfTree, element: ET.Element, attribute: str, field: str, allow_zero: bool = False) -> float:
@@ -96,7 +90,7 @@ def _collision(reader: UrdfTree, element: ET.Element, where: str) -> CollisionSh
     field = f"{where}/geometry/{shape.tag}"
     origin = _origin(reader, element, where)
     if shape.tag == "box":
-        size = reader._numbers(shape, "size", f"{field}@size", default=(0.0, 0.0, 0.0))
+        size = reader.numbers(shape, "size", f"{field}@size", default=(0.0, 0.0, 0.0))
         if not np.all(size > 0):
             raise reader.fail(f"{field}@size", f"{size.tolist()}; valid: three extents > 0")
         return CollisionShape("box", origin, tuple(size.tolist()))
@@ -109,7 +103,7 @@ def _collision(reader: UrdfTree, element: ET.Element, where: str) -> CollisionSh
         uri = shape.get("filename", "").strip()
         if not uri:
             raise reader.fail(f"{field}@filename", "missing")
-        scale = reader._numbers(shape, "scale", f"{field}@scale", default=(1.0, 1.0, 1.0))
+        scale = reader.numbers(shape, "scale", f"{field}@scale", default=(1.0, 1.0, 1.0))
         return CollisionShape("mesh", origin, tuple(scale.tolist()), uri)
     raise reader.fail(field, f"<{shape.tag}>; valid: box, cylinder, sphere, mesh")
 
