@@ -14,6 +14,10 @@ filter as every other goal:
 * :func:`singularity_scale`: approaching a singularity (the smallest singular value of the
   task Jacobian falling towards ``stop``) scales the motion down; a motion that leaves it
   (the singular value rising) is not slowed, so the arm never halts where it cannot leave.
+  The direction is the commanded twist's through the Jacobian transpose (``Jᵀ v``: the joint
+  motion that does most for it), so a motion scaled to nothing still knows where it would go;
+  the reference of :class:`TwistReference` advances by the scaled twist, so it does not run
+  ahead of an arm held back.
   The smallest singular value rather than the condition number: with angular rows (1) and
   linear rows (m) in one Jacobian the condition number of a healthy arm is already 50 to 100
   (the irb120 at rest: 60), while σ_min falls to 0 at any singularity, as the law's damping
@@ -37,8 +41,8 @@ from manip_kin.rotations import matrix_to_rotvec, rotvec_to_matrix
 #: How far the twist reference may lead the controlled frame [m] and [rad].
 MAX_LEAD_M = 0.01
 MAX_LEAD_RAD = 0.05
-#: How far ahead [s] σ_min is probed to tell approaching from leaving.
-PROBE_TIME_S = 0.02
+#: How far along the motion σ_min is probed to tell approaching from leaving [rad | m of q].
+PROBE_STEP = 1e-3
 
 
 def resolve_frame(model: RobotModel, frame_id: str) -> int:
@@ -79,21 +83,31 @@ def smallest_singular_value(jacobian_rows: np.ndarray) -> float:
 
 
 def singularity_scale(
-    model: RobotModel, q: np.ndarray, qdot: np.ndarray, frame_index: int, rows, scaling: SingularityScaling
+    model: RobotModel,
+    q: np.ndarray,
+    direction: np.ndarray,
+    frame_index: int,
+    rows,
+    scaling: SingularityScaling,
+    sigma_now: float | None = None,
 ) -> tuple[float, float]:
-    """``(scale, σ_min)``: the factor [0, 1] for ``qdot`` at ``q``.
+    """``(scale, σ_min)``: the factor [0, 1] for a motion along the joint-space ``direction``
+    from ``q`` (only its sign along the way matters; ``sigma_now``: σ_min at ``q`` if known).
 
-    1 above ``scaling.start`` and whenever ``qdot`` raises σ_min (leaving the singularity);
+    1 above ``scaling.start`` and whenever the motion raises σ_min (leaving the singularity);
     towards it, falling linearly to 0 at ``scaling.stop``.
     """
     rows = list(rows)
-    now = smallest_singular_value(pose_and_jacobian_in_base(model, q, frame_index)[1][rows])
-    if now >= scaling.start:
-        return 1.0, now
-    ahead = smallest_singular_value(pose_and_jacobian_in_base(model, q + qdot * PROBE_TIME_S, frame_index)[1][rows])
-    if ahead >= now:
-        return 1.0, now
-    return max(0.0, min(1.0, (now - scaling.stop) / (scaling.start - scaling.stop))), now
+    if sigma_now is None:
+        sigma_now = smallest_singular_value(pose_and_jacobian_in_base(model, q, frame_index)[1][rows])
+    length = float(np.linalg.norm(direction))
+    if sigma_now >= scaling.start or length == 0.0:
+        return 1.0, sigma_now
+    probe = q + direction * (PROBE_STEP / length)
+    ahead = smallest_singular_value(pose_and_jacobian_in_base(model, probe, frame_index)[1][rows])
+    if ahead >= sigma_now:
+        return 1.0, sigma_now
+    return max(0.0, min(1.0, (sigma_now - scaling.stop) / (scaling.start - scaling.stop))), sigma_now
 
 
 class TwistReference:

@@ -28,10 +28,13 @@ class Harness:
         self.nodes = []
         self._publishers = {}
 
-    def start(self, node_class, namespace: str | None = None, **parameters):
-        """Start ``node_class`` with these parameters, in ``namespace`` if given."""
+    def start(self, node_class, namespace: str | None = None, cli_args: list[str] | None = None, **parameters):
+        """Start ``node_class`` with these parameters, in ``namespace`` if given, with ``cli_args``
+        (``["--ros-args", "--params-file", PATH]``) if given."""
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
         extra = {"namespace": namespace} if namespace else {}
+        if cli_args:
+            extra["cli_args"] = list(cli_args)
         node = node_class(context=self.context, parameter_overrides=overrides, **extra)
         self.nodes.append(node)
         return node

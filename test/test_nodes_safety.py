@@ -148,3 +148,97 @@ def test_a_goal_rejected_for_its_frame_is_reported_with_the_reason(harness):
         assert values["base_frame"] == "base_link"
     finally:
         hardware.close()
+
+
+MOVEIT_JOINT_LIMITS = """\
+# A MoveIt config's joint_limits.yaml, under the node's ros__parameters (its other keys ignored).
+cartesian_controller:
+  ros__parameters:
+    default_velocity_scaling_factor: 0.1
+    joint_limits:
+      joint1:
+        has_velocity_limits: true
+        max_velocity: 1.5
+        has_acceleration_limits: true
+        max_acceleration: 3
+        has_deceleration_limits: true
+        max_deceleration: 2.0
+        has_jerk_limits: true
+        max_jerk: 40.0
+        has_position_limits: true
+        max_position: 2.8
+      joint6:
+        has_acceleration_limits: false
+        has_jerk_limits: false
+"""
+
+
+def test_joint_limits_load_from_a_moveit_style_file_and_change_at_run_time(harness, tmp_path):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from manip_kin.nodes.cartesian_controller import CartesianControllerNode
+
+    path = tmp_path / "joint_limits.yaml"
+    path.write_text(MOVEIT_JOINT_LIMITS)
+    node = harness.start(
+        CartesianControllerNode, cli_args=["--ros-args", "--params-file", str(path)], robot="genova7", rate_hz=RATE
+    )
+    harness.executor.add_node(node)
+    limits = node.command_filter.limits
+    model = load_robot("genova7")
+    defaults = JointLimits.of(model)
+    # joint1 from the file: the deceleration bound is the lower one; an int (3) is a double.
+    assert limits.velocity[0] == 1.5 and limits.acceleration[0] == 2.0 and limits.jerk[0] == 40.0
+    assert limits.per_joint[0].max_acceleration == 3.0
+    # joint6: no acceleration or jerk limit; the others keep their defaults.
+    assert limits.acceleration[5] == np.inf and limits.jerk[5] == np.inf
+    np.testing.assert_array_equal(limits.acceleration[1:5], defaults.acceleration[1:5])
+    # A live change is used from the next cycle; a refused one changes nothing.
+    client = AsyncParameterClient(harness.node, "cartesian_controller")
+    assert client.wait_for_services(5.0)
+    future = client.set_parameters([Parameter("joint_limits.joint2.max_jerk", value=100.0)])
+    assert harness.spin_until(future.done, 5) and future.result().results[0].successful
+    assert node.command_filter.limits.jerk[1] == 100.0
+    future = client.set_parameters([Parameter("joint_limits.joint2.max_jerk", value=-1.0)])
+    assert harness.spin_until(future.done, 5)
+    assert not future.result().results[0].successful and "max_jerk" in future.result().results[0].reason
+    assert node.command_filter.limits.jerk[1] == 100.0
+
+
+def test_joint_references_feed_forward_and_a_goal_timeout_keep_the_limits(harness):
+    """The other inputs: a joint reference jumping away (with a velocity), a pose goal with a
+    twist feed-forward, then goal_timeout dropping the goal: the stream stays within the limits
+    and ends at rest."""
+    from manip_kin.nodes import conversions as conv
+
+    model, hardware, node, _ = start_held_arm(
+        harness, "genova7", load_robot("genova7").start_configuration(), goal_timeout=0.6
+    )
+    try:
+        ns = node.test_namespace
+        q = hardware.positions()
+        reference = q + np.array([0.3, -0.2, 0.2, 0.1, -0.3, 0.05, 0.4])
+        msg = conv.make_joint_state(model.joint_names, reference, np.full(model.dof, 0.5))
+        msg.header.stamp = harness.node.get_clock().now().to_msg()
+        harness.publish(f"{ns}/joint_reference", msg)
+        assert harness.spin_until(lambda: held_speed(hardware) > 0.2, 5)
+        pose = frame_pose(model, hardware.positions())
+
+        def goal_with_feed_forward():
+            stamp = harness.node.get_clock().now().to_msg()
+            harness.publish(f"{ns}/goal_pose", conv.make_pose_stamped(pose, "base_link", stamp))
+            harness.publish(
+                f"{ns}/goal_twist", conv.make_twist_stamped([0.0, 0.0, 0.5], [0.2, 0.0, 0.0], "base_link", stamp)
+            )
+
+        harness.spin_for(0.3, every=goal_with_feed_forward)
+        assert node.supervisor.goal_kind == "pose"
+        # No new goal for goal_timeout: stale, the commands come to rest.
+        assert harness.spin_until(lambda: node.state == "stale input" and not np.any(hardware.held_command()), 5)
+        commands = np.array([values for _, values in hardware.commands])
+        assert np.max(np.abs(commands)) > 0.2
+        assert_stream_within(commands, JointLimits.of(model), 1.0 / RATE)
+        assert not np.any(commands[-1])
+    finally:
+        hardware.close()

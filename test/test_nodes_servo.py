@@ -127,3 +127,40 @@ def test_near_a_singularity_motion_is_slowed_going_in_and_not_coming_out(harness
         assert down[2] == pytest.approx(-speed, rel=0.05), down
     finally:
         hardware.close()
+
+
+def test_teleop_in_a_terminal_drives_the_arm_and_space_stops_it(harness):
+    """End to end: ``manip_kin teleop`` in a pseudo-terminal, keys in, the arm's pose changes
+    along +x, space brings it to rest, q exits and restores the terminal."""
+    import termios
+
+    from test_cli_teleop import _Terminal
+
+    from manip_kin.nodes.conversions import make_pose_stamped
+
+    model = load_robot("genova7")
+    start_q = model.start_configuration()
+    model, hardware, node, _ = start_held_arm(harness, "genova7", start_q, gain_linear=4.0, gain_angular=4.0)
+    tty = _Terminal(harness, "--namespace", node.test_namespace)
+    try:
+
+        def tool_pose():
+            pose = frame_pose(model, hardware.positions())
+            harness.publish(f"{node.test_namespace}/tool_pose", make_pose_stamped(pose, "base_link"))
+
+        tty.every = tool_pose
+        tty.wait(lambda: "\x1b[K" in tty.output)  # the first status line
+        x0 = frame_pose(model, hardware.positions())[0, 3]
+        tty.press("w", lambda: frame_pose(model, hardware.positions())[0, 3] - x0 > 0.01)
+        moved = frame_pose(model, hardware.positions())[:3, 3] - frame_pose(model, start_q)[:3, 3]
+        assert abs(moved[1]) < 0.2 * moved[0] and abs(moved[2]) < 0.2 * moved[0], moved  # along +x
+        tty.press(" ", lambda: not np.any(hardware.held_command()))
+        q = hardware.positions()
+        harness.spin_for(0.3, every=tool_pose)
+        np.testing.assert_array_equal(hardware.positions(), q)
+        tty.press("q", lambda: tty.status is not None)
+        assert tty.status == 0
+        assert termios.tcgetattr(tty.master) == tty.settings
+    finally:
+        tty.close()
+        hardware.close()

@@ -152,6 +152,24 @@ def test_goal_wait_timeout_exits_1(genova):
     assert "NOT converged after" in result.stdout + result.stderr
 
 
+def test_goals_without_wait_are_each_taken(genova):
+    """Six goals in a row without --wait: each command returns only once the controller reports
+    that goal's stamp as its goal (a lost one is sent again), so each is followed."""
+    client = genova.client()
+    stamps = []
+    for k in range(6):
+        result = run_cli(
+            genova, "goal", "--xyz", "0.2", f"{-0.66 - 0.01 * k:.2f}", "0.3", "--rpy", "0", "1.57", "0", "--json"
+        )
+        assert result.returncode == 0, result.stderr
+        stamps.append(json.loads(result.stdout)["stamp"])
+    assert len(set(stamps)) == 6
+    # The last one is the controller's goal now (each was, in turn: the CLI waited for it).
+    assert client.spin_until(
+        lambda: (s := client.latest_status("cartesian_controller")) and s.values["goal_stamp"] == stamps[-1], 5
+    )
+
+
 def test_controller_killed_and_restarted_recovers(genova):
     client = genova.client()
     far = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.15, -0.9, 0.35])

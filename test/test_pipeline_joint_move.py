@@ -160,11 +160,21 @@ def test_move_back_quintic_with_automatic_duration_and_bad_input(scara):
         return status is not None and status.values.get("joint_time_scaling") == "quintic"
 
     assert client.spin_until(quintic, 5), scara.log_tail("trajectory_generator")
-    # Automatic duration: the slowest joint at its velocity limit at the quintic's peak rate,
-    # 1.875 |Δq| / v, from wherever the first test left the arm (within 1e-3 of Q_GOAL).
-    q_start = np.array(report["q_start"])
-    limits = np.array([2.0, 2.0, 0.5, 2.0])
-    assert report["duration"] == pytest.approx(1.875 * np.max(np.abs(q_start) / limits), rel=1e-9)
+    # Automatic duration (timed by the generator): the slowest joint at its velocity limit at
+    # the quintic's peak rate 1.875 |Δq| / T, its acceleration limit at the peak 10/√3 |Δq| / T²
+    # or its jerk limit at the ends 60 |Δq| / T³, from wherever the first test left the arm
+    # (within 1e-3 of Q_GOAL). The default limits: full speed in 0.2 s, full acceleration in 20 ms.
+    delta = np.abs(np.array(report["q_start"]))
+    velocity = np.array([2.0, 2.0, 0.5, 2.0])
+    acceleration = velocity / 0.2
+    jerk = acceleration / 0.02
+    expected = max(
+        np.max(1.875 * delta / velocity),
+        np.max(np.sqrt(10 / np.sqrt(3) * delta / acceleration)),
+        np.max(np.cbrt(60 * delta / jerk)),
+    )
+    # The generator times it from its own joint state, a few ms after the CLI's snapshot.
+    assert report["duration"] == pytest.approx(expected, rel=2e-3)
     for args, fragment in [
         (["--q", "0", "0", "0.7", "0"], "'joint3' = 0.7 m is outside its limits; valid: [0, 0.5] m"),
         (["--q", "0", "0"], "--q has 2 values, the robot has 4 joints"),

@@ -94,7 +94,7 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         path = np.array([frame_pose(model, q)[:3, 3] for q in hardware.history[first_step:]])
         # The planned line started at the tool pose of the joint states (the arm was at rest).
         log = pipeline.log_text("trajectory_generator")
-        match = re.search(r"streaming a constant line from \[([^\]]*)\] to", log)
+        match = re.search(r"streaming a trapezoidal line from \[([^\]]*)\] to", log)
         assert match, log[-500:]
         np.testing.assert_allclose([float(v) for v in match.group(1).split(",")], start[:3, 3], atol=2e-4)
         # It went along the line: 1 mm is 50x what the delay of a 200 Hz loop explains (an offline

@@ -123,9 +123,7 @@ def _set_time_scaling(client, scaling: str, timeout: float) -> str:
 
 def run_move(args: argparse.Namespace) -> int:
     """``manip_kin move``."""
-    from manip_kin.nodes.conversions import JointStateMapper
-    from manip_kin.nodes.joint_messages import make_joint_trajectory
-    from manip_kin.pipeline import PipelineClient, PipelineError
+    from manip_kin.pipeline import PipelineClient
 
     if args.duration is not None and not args.duration > 0:
         raise InvalidArgumentError(f"--duration {args.duration!r}; valid: seconds > 0")
@@ -134,51 +132,59 @@ def run_move(args: argparse.Namespace) -> int:
     namespace = namespace_from_args(args)
     with PipelineClient(namespace=namespace) as client:
         try:
-            model = _model(args, client)
-            q_goal = _check_target(model, args.q)
-            client.current_positions(args.timeout)
-            q_start = JointStateMapper(model.joint_names).positions(client.joint_state)
-            scaling = client.wait_status(_GENERATOR, args.timeout).values.get("joint_time_scaling") or "cubic"
-            if args.time_scaling is not None:
-                scaling = _set_time_scaling(client, args.time_scaling, args.timeout)
-            # 0: as fast as the generator's joint limits allow; it times the move itself, so a
-            # duration computed here from a stale snapshot cannot be refused.
-            point = TrajectoryPoint(args.duration or 0.0, q_goal)
-            for node in (_GENERATOR, _CONTROLLER) if args.wait else (_GENERATOR,):
-                client.wait_status(node, args.timeout)  # /diagnostics matched before the move goes out
-            start = time.monotonic()
-            stamp = client.send_joint_trajectory(make_joint_trajectory(model.joint_names, [point]), args.timeout)
-            generator = client.wait_target_taken(stamp, args.timeout, _GENERATOR)
-        except PipelineError as error:
-            print(f"manip_kin move: error: {error}", file=sys.stderr)
-            return 2
-        if generator.values.get("rejected_stamp") == stamp:
-            reason = generator.values.get("last_rejection", "")
-            print(f"manip_kin move: error: trajectory rejected: {reason}", file=sys.stderr)
-            return 2
-        duration = generator.number("duration")
-        payload = {
-            "topic": client.topic("joint_trajectory"),
-            "stamp": stamp,
-            "joint_names": model.joint_names,
-            "q_start": q_start.tolist(),
-            "q_goal": q_goal.tolist(),
-            "duration": duration,
-            "time_scaling": scaling,
-        }
-        summary = (
-            f"move of {model.name} from {np.round(q_start, 4).tolist()} to {np.round(q_goal, 4).tolist()} "
-            f"in {duration:.3f} s ({scaling})"
-        )
-        if not args.wait:
-            _report(args, payload, f"{summary} started on {payload['topic']} (stamp {stamp})")
-            return 0
-        try:
-            return _await(args, client, stamp, start, payload, summary)
+            return _move(args, client)
         except KeyboardInterrupt:
             from manip_kin.cli.ros_commands import stop_on_interrupt
 
             return stop_on_interrupt("move", client, (_GENERATOR, _CONTROLLER))
+
+
+def _move(args: argparse.Namespace, client) -> int:
+    from manip_kin.nodes.conversions import JointStateMapper
+    from manip_kin.nodes.joint_messages import make_joint_trajectory
+    from manip_kin.pipeline import PipelineError
+
+    try:
+        model = _model(args, client)
+        q_goal = _check_target(model, args.q)
+        client.current_positions(args.timeout)
+        q_start = JointStateMapper(model.joint_names).positions(client.joint_state)
+        scaling = client.wait_status(_GENERATOR, args.timeout).values.get("joint_time_scaling") or "cubic"
+        if args.time_scaling is not None:
+            scaling = _set_time_scaling(client, args.time_scaling, args.timeout)
+        # 0: as fast as the generator's joint limits allow; it times the move itself, so a
+        # duration computed here from a stale snapshot cannot be refused.
+        point = TrajectoryPoint(args.duration or 0.0, q_goal)
+        for node in (_GENERATOR, _CONTROLLER) if args.wait else (_GENERATOR,):
+            client.wait_status(node, args.timeout)  # /diagnostics matched before the move goes out
+        start = time.monotonic()
+        stamp = client.send_joint_trajectory(make_joint_trajectory(model.joint_names, [point]), args.timeout)
+        generator = client.wait_target_taken(stamp, args.timeout, _GENERATOR)
+    except PipelineError as error:
+        print(f"manip_kin move: error: {error}", file=sys.stderr)
+        return 2
+    if generator.values.get("rejected_stamp") == stamp:
+        reason = generator.values.get("last_rejection", "")
+        print(f"manip_kin move: error: trajectory rejected: {reason}", file=sys.stderr)
+        return 2
+    duration = generator.number("duration")
+    payload = {
+        "topic": client.topic("joint_trajectory"),
+        "stamp": stamp,
+        "joint_names": model.joint_names,
+        "q_start": q_start.tolist(),
+        "q_goal": q_goal.tolist(),
+        "duration": duration,
+        "time_scaling": scaling,
+    }
+    summary = (
+        f"move of {model.name} from {np.round(q_start, 4).tolist()} to {np.round(q_goal, 4).tolist()} "
+        f"in {duration:.3f} s ({scaling})"
+    )
+    if not args.wait:
+        _report(args, payload, f"{summary} started on {payload['topic']} (stamp {stamp})")
+        return 0
+    return _await(args, client, stamp, start, payload, summary)
 
 
 def _await(args, client, stamp: str, start: float, payload: dict, summary: str) -> int:

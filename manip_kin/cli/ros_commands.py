@@ -210,13 +210,14 @@ def run_goal(args: argparse.Namespace) -> int:
     _check_timeout(args)
     namespace = namespace_from_args(args)
     with PipelineClient(watch_state=False, namespace=namespace) as client:
-        delivered = _deliver(args, client, client.send_goal, "goal_pose", "goal", ("cartesian_controller",))
-        if isinstance(delivered, int):
-            return delivered
-        start, stamp, payload = delivered
         try:
+            delivered = _deliver(args, client, client.send_goal, "goal_pose", "goal", ("cartesian_controller",))
+            if isinstance(delivered, int):
+                return delivered
+            start, stamp, payload = delivered
             return _await_convergence(args, client, stamp, start, payload, "goal", args.timeout)
         except KeyboardInterrupt:
+            # Also while the goal is being delivered: the controller may have it already.
             return stop_on_interrupt("goal", client, ("cartesian_controller",))
 
 

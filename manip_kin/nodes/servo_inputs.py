@@ -26,7 +26,14 @@ from manip_kin.joint_control import joint_tracking_step
 from manip_kin.kinematics import frame_pose, pose_and_jacobian_in_base
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.rate_loop import PolledSubscription
-from manip_kin.servo import JogReference, SingularityScaling, TwistReference, resolve_frame, singularity_scale
+from manip_kin.servo import (
+    JogReference,
+    SingularityScaling,
+    TwistReference,
+    resolve_frame,
+    singularity_scale,
+    smallest_singular_value,
+)
 from manip_kin.supervisors import GoalKind
 
 
@@ -128,11 +135,11 @@ class ServoInputs:
         return dt if last is None else min(max((now_ns - last) * 1e-9, 0.0), 5.0 * dt)
 
     def twist_step(self, controller, q: np.ndarray, now_ns: int, dt: float, horizon: float):
-        """The law's output for the twist command at ``q``, its command scaled for singularities."""
+        """The law's output for the twist command at ``q``, scaled for singularities."""
         dt = self._elapsed(now_ns, dt)
         angular, linear, index = self.twist
         controlled = controller.frame_index
-        pose, _ = pose_and_jacobian_in_base(self.model, q, controlled)
+        pose, jacobian = pose_and_jacobian_in_base(self.model, q, controlled)
         if index == 0:
             rotation = np.eye(3)
         elif index == controlled:
@@ -140,12 +147,16 @@ class ServoInputs:
         else:
             rotation = frame_pose(self.model, q, index)[:3, :3]
         angular, linear = rotation @ angular, rotation @ linear
+        rows = list(controller.task.rows)
+        task_jacobian = jacobian[rows]
+        direction = task_jacobian.T @ np.concatenate([angular, linear])[rows]
+        self.scale, self.sigma_min = singularity_scale(
+            self.model, q, direction, controlled, rows, self.scaling, smallest_singular_value(task_jacobian)
+        )
+        angular, linear = angular * self.scale, linear * self.scale
         goal = self._twist_reference.advance(pose, angular, linear, dt)
         output = controller.step(q, goal, (angular, linear), horizon)
-        self.scale, self.sigma_min = singularity_scale(
-            self.model, q, output.qdot, controlled, controller.task.rows, self.scaling
-        )
-        return output, output.qdot * self.scale
+        return output, output.qdot
 
     def jog_step(self, q: np.ndarray, now_ns: int, dt: float, horizon: float, gain: float, config):
         """The joint tracking output following the jog at ``q``."""
