@@ -5,8 +5,11 @@ and position limits a step is: forward kinematics and Jacobian, the pose error, 
 reference twist, ``J Jᵀ``, a Cholesky solve, ``Jᵀ x``, a limit check and the velocity
 scaling — about a thousand float operations. Separate functions (and numpy calls) for
 each of those cost more in call overhead and tuple packing than in arithmetic, so this
-module generates one function doing all of it on local variables, with the model and the
-controller's constants (gains, limits, thresholds, constant Jacobian entries) folded in.
+module generates one function doing all of it on local variables, with the model's geometry
+and constant Jacobian entries folded in. The controller's values (gains, ε, λ_max, the limits)
+are arguments of a generated factory (:func:`compile_step`): the code depends only on the
+structure, is built once per structure (:mod:`manip_kin.kernel_cache`), and retuning binds the
+new values to it without generating anything.
 
 The generated step is the only implementation of the control law. The common case runs
 inline; the rare ones are calls from it: near a singularity (the cheap eigenvalue bound does
