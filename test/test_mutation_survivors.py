@@ -134,6 +134,7 @@ def test_a_single_nan_never_passes_the_learned_joint_state_fast_path():
     decoder = JointStateDecoder(names, np.full(6, -3.0), np.full(6, 3.0))
     good = [0.1, -0.2, 0.3, -0.4, 0.5, -0.6]
     np.testing.assert_array_equal(decoder.positions(serialize_message(conv.make_joint_state(names, good))), good)
+    assert decoder._blob is not None  # the layout is learned: what follows takes the fast path
     for j in range(6):
         for bad in (math.nan, math.inf):
             values = list(good)
