@@ -10,6 +10,10 @@ where the mutant is among its operators):
 * a single NaN passing the learned joint-state fast path;
 * ``within_limits`` ignoring its tolerance;
 * the recording writer ignoring the middleware's source timestamp.
+
+The second part holds tests for survivors of the first ``make mutate`` round that were real
+gaps (task names and masks, slerp's short way, the input bounds' tool and margins, the random
+configuration's margin, the numpy damped least squares).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from manip_kin.bounds import InputBounds
 from manip_kin.closed_form import closed_form_solutions
 from manip_kin.control import pose_error
 from manip_kin.damped_least_squares import damped_least_squares
+from manip_kin.errors import InvalidArgumentError
 from manip_kin.ik_iteration import general_iteration
 from manip_kin.ik_problem import problem_for
 from manip_kin.kinematics import frame_pose, jacobian
@@ -173,3 +178,62 @@ def test_the_writer_stamps_a_headerless_message_with_its_source_time(tmp_path):
         ("/commands", T0 + 901, T0 + 901),
         ("/states", T0 + 902, T0 + 200),
     ]
+
+
+# --- survivors of the first `make mutate` round (seed 25) that were missing tests ----------------
+
+
+def test_task_names_masks_and_error_norms():
+    from manip_kin.tasks import Task, parse_task
+
+    assert parse_task("ry, x,y").name == "ry,x,y" and parse_task("rz,x,y,z").name == "position_yaw"
+    for bad in ([1, 1, 1, 0, 0], [1, 1, 1, 0, 0, 2], [0] * 6):
+        with pytest.raises(InvalidArgumentError, match="task mask"):
+            parse_task(bad)
+    orientation, position = Task((0, 1, 3, 4)).error_norms([3.0, 4.0, 7.0], [6.0, 8.0, 9.0])
+    assert (orientation, position) == (5.0, 10.0)  # the rows' Euclidean norms, rz and z left out
+
+
+def test_slerp_takes_the_short_way_and_reaches_a_nearby_end():
+    from manip_kin.rotations import quat_slerp
+
+    def about_z(angle):
+        return np.array([0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)])
+
+    # -q is the same rotation as q: a quarter of the way to -(1 rad about z) is 0.25 rad about z.
+    quarter = quat_slerp(about_z(0.0), -about_z(1.0), 0.25)
+    assert abs(quarter @ about_z(0.25)) == pytest.approx(1.0, abs=1e-12)
+    a = about_z(0.2)
+    close = about_z(0.2 + 2e-7)
+    np.testing.assert_allclose(quat_slerp(a, close, 1.0), close, atol=1e-12)
+
+
+def test_input_bounds_contain_the_tool_and_widen_the_joint_ranges():
+    model = load_robot("genova7")
+    long_tool = np.eye(4)
+    long_tool[0, 3] = 1.5
+    with_tool = RobotModel(name="long tool", joints=model.joints, ee_offset=model.ee_offset, tool=long_tool)
+    bounds = InputBounds.of(with_tool)
+    rng = np.random.default_rng(4)
+    farthest = max(np.linalg.norm(frame_pose(with_tool, with_tool.random_configuration(rng))[:3, 3]) for _ in range(50))
+    assert farthest > 1.5 and farthest <= bounds.reach_radius
+    assert np.all(bounds.position_lower <= with_tool.lower - 0.01) and np.all(
+        bounds.position_upper >= with_tool.upper + 0.01
+    )
+    assert bounds.max_twist_linear >= bounds.max_linear_speed > 0.0
+
+
+def test_random_configurations_keep_their_margin():
+    model = load_robot("genova7")
+    rng = np.random.default_rng(5)
+    span = model.upper - model.lower
+    for _ in range(100):
+        q = model.random_configuration(rng, margin=0.25)
+        assert np.all(q >= model.lower + 0.25 * span - 1e-12) and np.all(q <= model.upper - 0.25 * span + 1e-12)
+
+
+def test_the_numpy_damped_least_squares_is_the_textbook_formula():
+    rng = np.random.default_rng(6)
+    matrix, rhs = rng.normal(size=(3, 5)), rng.normal(size=3)
+    expected = matrix.T @ np.linalg.inv(matrix @ matrix.T + 0.3**2 * np.eye(3)) @ rhs
+    np.testing.assert_allclose(damped_least_squares(matrix, rhs, 0.3), expected, rtol=1e-12)
