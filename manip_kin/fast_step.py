@@ -7,9 +7,9 @@ scaling — about a thousand float operations. Separate functions (and numpy cal
 each of those cost more in call overhead and tuple packing than in arithmetic, so this
 module generates one function doing all of it on local variables, with the model's geometry
 and constant Jacobian entries folded in. The controller's values (gains, ε, λ_max, the limits)
-are arguments of a generated factory (:func:`compile_step`): the code depends only on the
-structure, is built once per structure (:mod:`manip_kin.kernel_cache`), and retuning binds the
-new values to it without generating anything.
+are the generated step's globals, bound per controller (:func:`compile_step`): the code
+depends only on the structure, is built once per structure (:mod:`manip_kin.kernel_cache`), and
+retuning binds the new values to it without generating anything.
 
 The generated step is the only implementation of the control law. The common case runs
 inline; the rare ones are calls from it: near a singularity (the cheap eigenvalue bound does
@@ -33,7 +33,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.damped_least_squares import damping_sq, symmetric_eigenvalues
-from manip_kin.kernel_cache import kernel
+from manip_kin.kernel_cache import bind, kernel
 from manip_kin.rotations import rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
@@ -131,23 +131,6 @@ def _chain_and_error_lines(header: str, chain: Callable, dof: int) -> tuple[list
     return lines, tokens, constants
 
 
-#: The names of the generated step's factory, in order: what the controller passes when it
-#: builds a step (the tunable values are these arguments, not part of the source).
-STEP_FACTORY_ARGUMENTS = (
-    "OUTPUT",
-    "SOLVE",
-    "REDISTRIBUTE",
-    "GAIN_ANGULAR",
-    "GAIN_LINEAR",
-    "EPSILON_SQ",
-    "DAMPING_MAX_SQ",
-    "ABSURD",
-    "LOWER",
-    "UPPER",
-    "INVERSE_SPEED_LIMITS",
-)
-
-
 def step_source(
     chain: Callable,
     dof: int,
@@ -155,16 +138,16 @@ def step_source(
     position_limited: Sequence[int] = (),
     speed_limited: Sequence[int] = (),
 ) -> str:
-    """Source of the control law of :mod:`manip_kin.control`, every case, as a step factory.
+    """Source of ``step(q, g, f, dt)``: the control law of :mod:`manip_kin.control`, every case.
 
-    The source defines ``build(OUTPUT, SOLVE, REDISTRIBUTE, GAIN_ANGULAR, GAIN_LINEAR,
-    EPSILON_SQ, DAMPING_MAX_SQ, ABSURD, LOWER, UPPER, INVERSE_SPEED_LIMITS)``
-    (:data:`STEP_FACTORY_ARGUMENTS`) returning ``step(q, g, f, dt)``. It depends only on the
-    structure: the chain, the task ``rows``, the joints whose position limits are checked
-    (``position_limited``: those with a finite limit, none when the limits are off) and those
-    whose speed is bounded (``speed_limited``). Gains, ε², λ_max², the limits themselves and
-    the absurd bound are the factory's arguments, so retuning builds a new step from the same
-    code.
+    The source depends only on the structure: the chain, the task ``rows``, the joints whose
+    position limits are checked (``position_limited``: those with a finite limit, none when the
+    limits are off) and those whose speed is bounded (``speed_limited``). The values are
+    globals of the step, bound per controller by :func:`compile_step`: ``GAIN_ANGULAR``,
+    ``GAIN_LINEAR``, ``EPSILON_SQ`` (ε²), ``DAMPING_MAX_SQ`` (λ_max²), ``ABSURD`` and
+    ``NEGATIVE_ABSURD``, per limited joint j ``LO{j}``/``HI{j}`` (position limits) and
+    ``SP{j}``/``NSP{j}``/``IV{j}`` (± the speed limit and its inverse), and ``OUTPUT``,
+    ``SOLVE``, ``REDISTRIBUTE``. So retuning binds new values to the same code.
 
     The step takes ``q`` (n floats), the goal pose rows ``g`` (at least 3 rows of 4 floats),
     the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and returns an
@@ -281,13 +264,7 @@ def step_source(
         "singular=SINGULAR)"
     )
     lines.append("    return OUT")
-    # The factory: the tunable values become the step's free variables, one per scalar.
-    factory = [f"def build({', '.join(STEP_FACTORY_ARGUMENTS)}):", "    NEGATIVE_ABSURD = -ABSURD"]
-    factory += [f"    LO{j} = LOWER[{j}]; HI{j} = UPPER[{j}]" for j in position_limited]
-    factory += [f"    IV{j} = INVERSE_SPEED_LIMITS[{j}]; SP{j} = 1.0 / IV{j}; NSP{j} = -SP{j}" for j in speed_limited]
-    factory += ["    " + line for line in lines]
-    factory.append("    return step")
-    return "\n".join(factory) + "\n"
+    return "\n".join(lines) + "\n"
 
 
 # What the generated steps call, by these names.
@@ -321,7 +298,7 @@ def compile_step(
     """A control step ``step(q, g, f, dt)`` (see :func:`step_source`) with these values.
 
     The code is built once per structure (:mod:`manip_kin.kernel_cache`); the values only
-    bind a new step to it, so calling this with other gains compiles nothing.
+    bind a new function to it, so calling this with other gains compiles nothing.
 
     Args:
         chain: the generated chain with its ``source``.
@@ -347,25 +324,28 @@ def compile_step(
     speed_limited: tuple[int, ...] = ()
     if inverse_velocity_limits is not None:
         speed_limited = tuple(j for j in range(dof) if inverse_velocity_limits[j] > 0.0)
-    build = kernel(
+    template = kernel(
         "control step",
         (chain.source, dof, rows, position_limited, speed_limited),
         lambda: step_source(chain, dof, rows, position_limited, speed_limited),
-        "build",
+        "step",
         _STEP_NAMESPACE,
     )
-    step = build(
-        output_class,
-        solve,
-        redistribute,
-        float(gain_angular),
-        float(gain_linear),
-        float(epsilon_sq),
-        float(damping_max_sq),
-        float(absurd),
-        [float(v) for v in lower] if position_limited else (),
-        [float(v) for v in upper] if position_limited else (),
-        [float(v) for v in inverse_velocity_limits] if speed_limited else (),
-    )
-    step.source = build.source
-    return step
+    # The values as the step's globals: read as fast as literals (a closure's cells are not).
+    values: dict[str, object] = {
+        "OUTPUT": output_class,
+        "SOLVE": solve,
+        "REDISTRIBUTE": redistribute,
+        "GAIN_ANGULAR": float(gain_angular),
+        "GAIN_LINEAR": float(gain_linear),
+        "EPSILON_SQ": float(epsilon_sq),
+        "DAMPING_MAX_SQ": float(damping_max_sq),
+        "ABSURD": float(absurd),
+        "NEGATIVE_ABSURD": -float(absurd),
+    }
+    for j in position_limited:
+        values[f"LO{j}"], values[f"HI{j}"] = float(lower[j]), float(upper[j])
+    for j in speed_limited:
+        inverse = float(inverse_velocity_limits[j])
+        values[f"IV{j}"], values[f"SP{j}"], values[f"NSP{j}"] = inverse, 1.0 / inverse, -1.0 / inverse
+    return bind(template, values)

@@ -12,7 +12,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from manip_kin.fast_step import _GENERATED_MATH, _chain_and_error_lines
-from manip_kin.kernel_cache import kernel
+from manip_kin.kernel_cache import bind, kernel
 from manip_kin.unrolled_linalg import _product, _sum, damped_solve_lines, jacobian_entries
 
 
@@ -24,11 +24,11 @@ def ik_iteration_source(
     has_upper: Sequence[bool],
     wraps: Sequence[bool],
 ) -> str:
-    """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`), as a factory.
+    """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`).
 
     It depends only on the structure: which joints have a finite lower (``has_lower``) and
-    upper (``has_upper``) limit and which wrap by whole turns (``wraps``). The source defines
-    ``build(LOWER, UPPER)`` (the limit values, n each) returning
+    upper (``has_upper``) limit and which wrap by whole turns (``wraps``); the limit values are
+    globals ``LO{j}``/``HI{j}``, bound by :func:`compile_ik_iteration`.
     ``iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position)`` with
     ``q`` (n floats) and the target rows ``g`` evaluates the task error ``e`` at ``q`` and
     returns ``(status, q_next, orientation_error, position_error)``:
@@ -101,13 +101,7 @@ def ik_iteration_source(
             lines.append(f"    if N{j} > HI{j}:")
             lines.append(f"        N{j} = HI{j}")
     lines.append(f"    return 0, [{', '.join(f'N{j}' for j in range(n))}], O, P")
-    # The factory: the limit values become the iteration's free variables.
-    factory = ["def build(LOWER, UPPER):"]
-    factory += [f"    LO{j} = LOWER[{j}]" for j in range(n) if has_lower[j] or wraps[j]]
-    factory += [f"    HI{j} = UPPER[{j}]" for j in range(n) if has_upper[j] or wraps[j]]
-    factory += ["    " + line for line in lines]
-    factory.append("    return iterate")
-    return "\n".join(factory) + "\n"
+    return "\n".join(lines) + "\n"
 
 
 _IK_NAMESPACE = {**_GENERATED_MATH, "ceil": math.ceil, "TWO_PI": 2.0 * math.pi}
@@ -130,15 +124,15 @@ def compile_ik_iteration(
     has_lower = tuple(not math.isinf(v) for v in lower)
     has_upper = tuple(not math.isinf(v) for v in upper)
     try:
-        build = kernel(
+        template = kernel(
             "ik iteration",
             (chain.source, dof, rows, has_lower, has_upper, wraps),
             lambda: ik_iteration_source(chain, dof, rows, has_lower, has_upper, wraps),
-            "build",
+            "iterate",
             _IK_NAMESPACE,
         )
     except ValueError:
         return None
-    iterate = build([float(v) for v in lower], [float(v) for v in upper])
-    iterate.source = build.source
-    return iterate
+    values = {f"LO{j}": float(lower[j]) for j in range(dof) if has_lower[j] or wraps[j]}
+    values.update({f"HI{j}": float(upper[j]) for j in range(dof) if has_upper[j] or wraps[j]})
+    return bind(template, values)

@@ -1,17 +1,18 @@
 """The one cache of generated code: kernels keyed on their structure, bounded, readable in tracebacks.
 
-Every generated function (a chain's kinematics, the damped solve, the control step's and the
-IK iteration's factories) is built through :func:`kernel`. Its key is the *structural spec*:
+Every generated function (a chain's kinematics, the damped solve, the control step, the IK
+iteration) is built through :func:`kernel`. Its key is the *structural spec*:
 what the source text depends on (the chain's own source, the joint count, the task rows,
 which joints have limits), never an ``id()`` and never a tunable value. Gains, damping,
-thresholds and limit values are arguments of the generated factories
-(:func:`manip_kin.fast_step.compile_step`, :func:`manip_kin.ik_codegen.compile_ik_iteration`),
+thresholds and limit values are bound to the code afterwards (:func:`bind`, from
+:func:`manip_kin.fast_step.compile_step` and :func:`manip_kin.ik_codegen.compile_ik_iteration`),
 so retuning a running controller finds its kernel here and compiles nothing.
 
 The cache is least-recently-used with :data:`CAPACITY` entries. An evicted kernel stays valid
 for whoever holds it; building it again only costs the generation. Each generated source is
 registered with :mod:`linecache` under a name of its own (``<manip_kin control step 1a2b…>``),
 so a traceback through generated code shows its lines; the registration goes with the entry.
+:func:`bind` gives a kernel its values (as globals) without touching the cached code.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import linecache
 import threading
+import types
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Mapping
 
@@ -104,3 +106,15 @@ CACHE = KernelCache()
 def kernel(kind: str, key: tuple, source: Callable[[], str], name: str, namespace: Mapping[str, object]) -> Callable:
     """:meth:`KernelCache.kernel` of the process's cache :data:`CACHE`."""
     return CACHE.kernel(kind, key, source, name, namespace)
+
+
+def bind(function: Callable, values: Mapping[str, object]) -> Callable:
+    """A function running a kernel's code with ``values`` added to its globals.
+
+    How tunable values reach generated code: as globals, which the interpreter reads as fast
+    as literals, so the code is shared and each binding costs one dict. The kernel itself is
+    not changed.
+    """
+    bound = types.FunctionType(function.__code__, {**function.__globals__, **values}, function.__name__)
+    bound.source = function.source
+    return bound
