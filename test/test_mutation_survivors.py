@@ -26,7 +26,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
-from manip_kin.bounds import InputBounds
+from manip_kin.bounds import InputBounds, reach_radius
 from manip_kin.closed_form import closed_form_solutions
 from manip_kin.control import pose_error
 from manip_kin.damped_least_squares import damped_least_squares
@@ -217,6 +217,7 @@ def test_input_bounds_contain_the_tool_and_widen_the_joint_ranges():
     rng = np.random.default_rng(4)
     farthest = max(np.linalg.norm(frame_pose(with_tool, with_tool.random_configuration(rng))[:3, 3]) for _ in range(50))
     assert farthest > 1.5 and farthest <= bounds.reach_radius
+    assert reach_radius(with_tool) == bounds.reach_radius
     assert np.all(bounds.position_lower <= with_tool.lower - 0.01) and np.all(
         bounds.position_upper >= with_tool.upper + 0.01
     )
