@@ -238,3 +238,21 @@ def test_the_numpy_damped_least_squares_is_the_textbook_formula():
     matrix, rhs = rng.normal(size=(3, 5)), rng.normal(size=3)
     expected = matrix.T @ np.linalg.inv(matrix @ matrix.T + 0.3**2 * np.eye(3)) @ rhs
     np.testing.assert_allclose(damped_least_squares(matrix, rhs, 0.3), expected, rtol=1e-12)
+
+
+def test_the_identity_has_angle_zero_about_z():
+    from manip_kin.rotations import matrix_to_angle_axis
+
+    angle, axis = matrix_to_angle_axis(np.eye(3))
+    assert angle == 0.0 and axis.tolist() == [0.0, 0.0, 1.0]
+
+
+def test_an_absurd_goal_position_is_refused_with_its_coordinates():
+    from manip_kin.control import CartesianController
+
+    model = load_robot("genova7")
+    q = model.start_configuration()
+    goal = frame_pose(model, q)
+    goal[2, 3] = 1e200
+    with pytest.raises(InvalidArgumentError, match=r"goal position \[.*1e\+200\]; valid: \|values\| < 1e\+100 m"):
+        CartesianController(model).step(q, goal)
