@@ -20,6 +20,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from manip_kin.kernel_cache import kernel
+
 # Entries this close to 0 or ±1 in the fixed transforms are taken as exact: the table
 # rotations (and URDF rpy of ±π/2) leave 1e-17 residues that would only cost time.
 _SNAP = 1e-14
@@ -162,14 +164,21 @@ def compile_chain(
     with_jacobian: bool,
     vectorized: bool = False,
 ) -> Callable[[Sequence[float]], tuple[float, ...]]:
-    """Compile :func:`generate_source` into a function.
+    """Compile :func:`generate_source` into a function (through :mod:`manip_kin.kernel_cache`).
 
     With ``vectorized`` the same code runs on numpy arrays: pass one array of N values per
     joint and every returned entry is an array of N values (or a constant).
     """
-    source = generate_source(fixed, revolute, tail, count, with_jacobian)
-    namespace: dict[str, object] = {"cos": np.cos, "sin": np.sin} if vectorized else {"cos": math.cos, "sin": math.sin}
-    exec(compile(source, "<manip_kin chain>", "exec"), namespace)  # noqa: S102 - our own generated code
-    chain = namespace["chain"]
-    chain.source = source  # type: ignore[attr-defined]  # kept for inspection and debugging
-    return chain  # type: ignore[return-value]
+    fixed = np.ascontiguousarray(fixed, dtype=float)
+    tail = np.ascontiguousarray(tail, dtype=float)
+    revolute = tuple(bool(flag) for flag in revolute)
+    # The geometry is the structure here: the source folds every fixed transform in.
+    key = (fixed.shape, fixed.tobytes(), revolute, tail.tobytes(), count, with_jacobian, vectorized)
+    namespace = {"cos": np.cos, "sin": np.sin} if vectorized else {"cos": math.cos, "sin": math.sin}
+    return kernel(
+        "chain",
+        key,
+        lambda: generate_source(fixed, revolute, tail, count, with_jacobian),
+        "chain",
+        namespace,
+    )

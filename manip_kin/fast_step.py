@@ -5,8 +5,11 @@ and position limits a step is: forward kinematics and Jacobian, the pose error, 
 reference twist, ``J Jᵀ``, a Cholesky solve, ``Jᵀ x``, a limit check and the velocity
 scaling — about a thousand float operations. Separate functions (and numpy calls) for
 each of those cost more in call overhead and tuple packing than in arithmetic, so this
-module generates one function doing all of it on local variables, with the model and the
-controller's constants (gains, limits, thresholds, constant Jacobian entries) folded in.
+module generates one function doing all of it on local variables, with the model's geometry
+and constant Jacobian entries folded in. The controller's values (gains, ε, λ_max, the limits)
+are the generated step's globals, bound per controller (:func:`compile_step`): the code
+depends only on the structure, is built once per structure (:mod:`manip_kin.kernel_cache`), and
+retuning binds the new values to it without generating anything.
 
 The generated step is the only implementation of the control law. The common case runs
 inline; the rare ones are calls from it: near a singularity (the cheap eigenvalue bound does
@@ -30,6 +33,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.damped_least_squares import damping_sq, symmetric_eigenvalues
+from manip_kin.kernel_cache import bind, kernel
 from manip_kin.rotations import rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.source_inline import inline_lines
 from manip_kin.unrolled_linalg import (
@@ -131,31 +135,32 @@ def step_source(
     chain: Callable,
     dof: int,
     rows: Sequence[int],
-    gain_angular: float,
-    gain_linear: float,
-    epsilon_sq: float,
-    damping_max_sq: float,
-    lower: Sequence[float] | None,
-    upper: Sequence[float] | None,
-    inverse_velocity_limits: Sequence[float] | None,
-    absurd: float,
+    position_limited: Sequence[int] = (),
+    speed_limited: Sequence[int] = (),
 ) -> str:
     """Source of ``step(q, g, f, dt)``: the control law of :mod:`manip_kin.control`, every case.
 
-    The generated function takes ``q`` (n floats), the goal pose rows ``g`` (at least 3
-    rows of 4 floats), the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and
-    returns a :class:`manip_kin.control.ControlOutput` (the class is given as ``OUTPUT``
-    when compiling), or None for input it cannot use (a non-finite value, ``dt <= 0``, a
-    joint value or the sum of the goal position's absolute coordinates not within
-    ``±absurd``; it may also raise on a wrong ``q`` length). ``lower``/``upper`` None skip the position
-    limits, ``inverse_velocity_limits`` None the velocity scaling.
+    The source depends only on the structure: the chain, the task ``rows``, the joints whose
+    position limits are checked (``position_limited``: those with a finite limit, none when the
+    limits are off) and those whose speed is bounded (``speed_limited``). The values are
+    globals of the step, bound per controller by :func:`compile_step`: ``GAIN_ANGULAR``,
+    ``GAIN_LINEAR``, ``EPSILON_SQ`` (ε²), ``DAMPING_MAX_SQ`` (λ_max²), ``ABSURD`` and
+    ``NEGATIVE_ABSURD``, per limited joint j ``LO{j}``/``HI{j}`` (position limits) and
+    ``SP{j}``/``NSP{j}``/``IV{j}`` (± the speed limit and its inverse), and ``OUTPUT``,
+    ``SOLVE``, ``REDISTRIBUTE``. So retuning binds new values to the same code.
+
+    The step takes ``q`` (n floats), the goal pose rows ``g`` (at least 3 rows of 4 floats),
+    the feed-forward twist ``f`` (6 floats ``[ω; v]``) and ``dt`` [s], and returns an
+    ``OUTPUT`` (:class:`manip_kin.control.ControlOutput`), or None for input it cannot use (a
+    non-finite value, ``dt <= 0``, a joint value or the sum of the goal position's absolute
+    coordinates not within ``±ABSURD``; it may also raise on a wrong ``q`` length).
 
     The common case runs inline: the undamped solve, certified by the eigenvalue bounds of
-    ``J Jᵀ`` (σ_min² >= ``epsilon_sq``). When the certificate fails the step calls
+    ``J Jᵀ`` (σ_min² >= ``EPSILON_SQ``). When the certificate fails the step calls
     ``SOLVE(values, b)`` (:meth:`manip_kin.damped_least_squares.DampedSolver.solve`: exact
     σ_min and the damping rule); when a joint would cross a position limit it calls
     ``REDISTRIBUTE(q, values, b, qdot, dt, damping, singular)`` (the SNS step of
-    :class:`manip_kin.control.CartesianController`). Both are given when compiling.
+    :class:`manip_kin.control.CartesianController`).
     """
     n, m = dof, len(rows)
     lines, tokens, constants = _chain_and_error_lines("def step(q, g, f, dt):", chain, dof)
@@ -163,13 +168,12 @@ def step_source(
     lines.insert(2, "        return None")
     # Finite but absurd joint values or goal position (1e300) would overflow the arithmetic
     # into NaN rates: refused here (one comparison per value), explained by the caller.
-    inside = " and ".join(f"{-absurd!r} < q{j} < {absurd!r}" for j in range(n))
-    lines.append(f"    if not ({inside} and abs(GX) + abs(GY) + abs(GZ) < {absurd!r}):")
+    inside = " and ".join(f"NEGATIVE_ABSURD < q{j} < ABSURD" for j in range(n))
+    lines.append(f"    if not ({inside} and abs(GX) + abs(GY) + abs(GZ) < ABSURD):")
     lines.append("        return None")
     lines.append("    F0, F1, F2, F3, F4, F5 = f")
     for i, r in enumerate(rows):
-        gain = gain_angular if r < 3 else gain_linear
-        lines.append(f"    b{i} = {gain!r}*E{r} + F{r}")
+        lines.append(f"    b{i} = {'GAIN_ANGULAR' if r < 3 else 'GAIN_LINEAR'}*E{r} + F{r}")
     # A NaN or an infinity anywhere in the task makes x - x non-zero (NaN).
     check = " + ".join(f"b{i}" for i in range(m))
     lines.append(f"    W = {check}")
@@ -198,22 +202,22 @@ def step_source(
     if m > 1:
         # λ_min <= every Cholesky pivot (a pivot is a Schur complement, and eigenvalues
         # interlace): a pivot below ε² proves a singularity without the inverse trace.
-        pivots = " or ".join(f"p{j} < {epsilon_sq!r}" for j in range(m))
-        lines.append(f"        if not BOUND >= {epsilon_sq!r}:")
+        pivots = " or ".join(f"p{j} < EPSILON_SQ" for j in range(m))
+        lines.append("        if not BOUND >= EPSILON_SQ:")
         lines.append(f"            UNCERTIFIED = {pivots}")
         lines.append("            if not UNCERTIFIED:")
         lines += ["            " + line for line in _inverse_trace_lines(m)]
-        lines.append(f"                UNCERTIFIED = inverse_trace * {epsilon_sq!r} > 1.0")
+        lines.append("                UNCERTIFIED = inverse_trace * EPSILON_SQ > 1.0")
         lines.append("            if UNCERTIFIED:")
     else:
-        lines += [f"        if not BOUND >= {epsilon_sq!r}:", "            if True:"]
+        lines += ["        if not BOUND >= EPSILON_SQ:", "            if True:"]
     # Possibly near a singularity: σ_min² from the eigenvalues of J Jᵀ (the a's above), the
     # damping from the one rule (damped_least_squares.damping_sq, inlined), a shifted solve.
     gram = ", ".join(f"a{max(i, k)}_{min(i, k)}" for i in range(m) for k in range(m))
     deep = "                "
     lines.append(f"{deep}EIG = EIGENVALUES(({gram},), {m})")
     lines.append(f"{deep}SIGMA_SQ = EIG[0] if EIG[0] > 0.0 else 0.0")
-    lines += inline_lines(damping_sq, ["SIGMA_SQ", repr(epsilon_sq), repr(damping_max_sq)], ["d"], "DS_", deep)
+    lines += inline_lines(damping_sq, ["SIGMA_SQ", "EPSILON_SQ", "DAMPING_MAX_SQ"], ["d"], "DS_", deep)
     lines.append(f"{deep}if d > 0.0:")
     lines += [deep + line.replace("return None", "continue") for line in _cholesky_body(m, shifted=True)]
     for j in range(n):
@@ -221,7 +225,7 @@ def step_source(
     lines.append(f"{deep}    LAMBDA = sqrt(d); SINGULAR = True")
     lines.append(f"{deep}    break")
     # No damping configured (λ_max = 0) below ε: the least-squares fallback of the solver.
-    lines.append(f"{deep}if SIGMA_SQ < {epsilon_sq!r}:")
+    lines.append(f"{deep}if SIGMA_SQ < EPSILON_SQ:")
     lines.append(f"{deep}    continue")
     lines += ["    " + line for line in _cholesky_solve_lines(m)]
     for j in range(n):
@@ -232,29 +236,21 @@ def step_source(
     lines.append(f"        QDOT, LAMBDA, SINGULAR, MANIPULABILITY = SOLVE({values}, {rhs})")
     lines.append(f"        {qdot_names} = QDOT")
     lines.append("    LIMITED = ()")
-    if lower is not None and upper is not None:
-        inside = [
-            f"{float(lower[j])!r} <= q{j} + QD{j} * dt <= {float(upper[j])!r}"
-            for j in range(n)
-            if not (math.isinf(lower[j]) and math.isinf(upper[j]))
-        ]
-        if inside:
-            lines.append(f"    if not ({' and '.join(inside)}):")
-            lines.append(
-                f"        QDOT, LIMITED, LAMBDA, SINGULAR = REDISTRIBUTE(q, {values}, {rhs}, "
-                f"[{', '.join(f'QD{j}' for j in range(n))}], dt, LAMBDA, SINGULAR)"
-            )
-            lines.append(f"        {qdot_names} = QDOT")
+    if position_limited:
+        inside = " and ".join(f"LO{j} <= q{j} + QD{j} * dt <= HI{j}" for j in position_limited)
+        lines.append(f"    if not ({inside}):")
+        lines.append(
+            f"        QDOT, LIMITED, LAMBDA, SINGULAR = REDISTRIBUTE(q, {values}, {rhs}, "
+            f"[{', '.join(f'QD{j}' for j in range(n))}], dt, LAMBDA, SINGULAR)"
+        )
+        lines.append(f"        {qdot_names} = QDOT")
     lines.append("    S = 1.0")
-    # A joint without a velocity limit (inverse 0: the URDF gave none) takes no part.
-    limited = [] if inverse_velocity_limits is None else [j for j in range(n) if inverse_velocity_limits[j] > 0.0]
-    if limited:
+    if speed_limited:
         # Comparisons only in the common case; the scale is computed when some rate exceeds.
-        limits = {j: 1.0 / float(inverse_velocity_limits[j]) for j in limited}
-        exceeds = " or ".join(f"QD{j} > {limits[j]!r} or QD{j} < {-limits[j]!r}" for j in limited)
-        worst = ", ".join(f"abs(QD{j})*{float(inverse_velocity_limits[j])!r}" for j in limited)
+        exceeds = " or ".join(f"QD{j} > SP{j} or QD{j} < NSP{j}" for j in speed_limited)
+        worst = ", ".join(f"abs(QD{j})*IV{j}" for j in speed_limited)
         lines.append(f"    if {exceeds}:")
-        lines.append(f"        S = 1.0 / max({worst}{', 0.0' if len(limited) == 1 else ''})")
+        lines.append(f"        S = 1.0 / max({worst}{', 0.0' if len(speed_limited) == 1 else ''})")
         lines.append(f"        {qdot_names} = {', '.join(f'QD{j} * S' for j in range(n))},")
     # The ControlOutput is filled through __dict__ (it is a frozen dataclass; its __init__
     # would set each field through object.__setattr__, several times slower).
@@ -271,7 +267,15 @@ def step_source(
     return "\n".join(lines) + "\n"
 
 
-_CACHE: dict[tuple, tuple[Callable, object]] = {}
+# What the generated steps call, by these names.
+_STEP_NAMESPACE = {
+    **_GENERATED_MATH,
+    "array": np.array,
+    "NEW": object.__new__,
+    "INFINITY": math.inf,
+    "ONCE": (None,),
+    "EIGENVALUES": symmetric_eigenvalues,
+}
 
 
 def compile_step(
@@ -281,9 +285,20 @@ def compile_step(
     output_class: type,
     solve: Callable,
     redistribute: Callable,
-    **constants,
+    *,
+    gain_angular: float,
+    gain_linear: float,
+    epsilon_sq: float,
+    damping_max_sq: float,
+    lower: Sequence[float] | None,
+    upper: Sequence[float] | None,
+    inverse_velocity_limits: Sequence[float] | None,
+    absurd: float,
 ) -> Callable:
-    """Compile :func:`step_source` (the code object is cached per chain and constants).
+    """A control step ``step(q, g, f, dt)`` (see :func:`step_source`) with these values.
+
+    The code is built once per structure (:mod:`manip_kin.kernel_cache`); the values only
+    bind a new function to it, so calling this with other gains compiles nothing.
 
     Args:
         chain: the generated chain with its ``source``.
@@ -292,28 +307,45 @@ def compile_step(
         output_class: :class:`manip_kin.control.ControlOutput`.
         solve: ``SOLVE`` of :func:`step_source`.
         redistribute: ``REDISTRIBUTE`` of :func:`step_source`.
-        **constants: the remaining arguments of :func:`step_source`.
+        gain_angular: K_o [1/s].
+        gain_linear: K_p [1/s].
+        epsilon_sq: ε², the squared singular threshold.
+        damping_max_sq: λ_max².
+        lower: lower position limits (n values), None with ``upper`` to skip the position limits.
+        upper: upper position limits (n values).
+        inverse_velocity_limits: 1 / the speed limit per joint (0: none), None to skip the
+            velocity scaling.
+        absurd: joint values and goal coordinates beyond ± this are refused.
     """
-    key = (id(chain), dof, tuple(rows)) + tuple(
-        (name, tuple(value) if isinstance(value, (list, tuple)) else value) for name, value in sorted(constants.items())
+    rows = tuple(int(r) for r in rows)
+    position_limited: tuple[int, ...] = ()
+    if lower is not None and upper is not None:
+        position_limited = tuple(j for j in range(dof) if not (math.isinf(lower[j]) and math.isinf(upper[j])))
+    speed_limited: tuple[int, ...] = ()
+    if inverse_velocity_limits is not None:
+        speed_limited = tuple(j for j in range(dof) if inverse_velocity_limits[j] > 0.0)
+    template = kernel(
+        "control step",
+        (chain.source, dof, rows, position_limited, speed_limited),
+        lambda: step_source(chain, dof, rows, position_limited, speed_limited),
+        "step",
+        _STEP_NAMESPACE,
     )
-    cached = _CACHE.get(key)
-    if cached is None or cached[0] is not chain:
-        source = step_source(chain, dof, rows, **constants)
-        cached = (chain, compile(source, "<manip_kin control step>", "exec"), source)
-        _CACHE[key] = cached
-    namespace: dict = {
-        **_GENERATED_MATH,
-        "array": np.array,
-        "NEW": object.__new__,
+    # The values as the step's globals: read as fast as literals (a closure's cells are not).
+    values: dict[str, object] = {
         "OUTPUT": output_class,
-        "INFINITY": math.inf,
-        "ONCE": (None,),
         "SOLVE": solve,
-        "EIGENVALUES": symmetric_eigenvalues,
         "REDISTRIBUTE": redistribute,
+        "GAIN_ANGULAR": float(gain_angular),
+        "GAIN_LINEAR": float(gain_linear),
+        "EPSILON_SQ": float(epsilon_sq),
+        "DAMPING_MAX_SQ": float(damping_max_sq),
+        "ABSURD": float(absurd),
+        "NEGATIVE_ABSURD": -float(absurd),
     }
-    exec(cached[1], namespace)  # noqa: S102 - our own source
-    function = namespace["step"]
-    function.source = cached[2]
-    return function
+    for j in position_limited:
+        values[f"LO{j}"], values[f"HI{j}"] = float(lower[j]), float(upper[j])
+    for j in speed_limited:
+        inverse = float(inverse_velocity_limits[j])
+        values[f"IV{j}"], values[f"SP{j}"], values[f"NSP{j}"] = inverse, 1.0 / inverse, -1.0 / inverse
+    return bind(template, values)

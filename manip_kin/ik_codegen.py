@@ -12,6 +12,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from manip_kin.fast_step import _GENERATED_MATH, _chain_and_error_lines
+from manip_kin.kernel_cache import bind, kernel
 from manip_kin.unrolled_linalg import _product, _sum, damped_solve_lines, jacobian_entries
 
 
@@ -19,12 +20,15 @@ def ik_iteration_source(
     chain: Callable,
     dof: int,
     rows: Sequence[int],
-    lower: Sequence[float],
-    upper: Sequence[float],
+    has_lower: Sequence[bool],
+    has_upper: Sequence[bool],
     wraps: Sequence[bool],
 ) -> str:
     """Source of one damped least-squares IK iteration (see :mod:`manip_kin.ik`).
 
+    It depends only on the structure: which joints have a finite lower (``has_lower``) and
+    upper (``has_upper``) limit and which wrap by whole turns (``wraps``); the limit values are
+    globals ``LO{j}``/``HI{j}``, bound by :func:`compile_ik_iteration`.
     ``iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position)`` with
     ``q`` (n floats) and the target rows ``g`` evaluates the task error ``e`` at ``q`` and
     returns ``(status, q_next, orientation_error, position_error)``:
@@ -42,7 +46,7 @@ def ik_iteration_source(
     lines, tokens, constants = _chain_and_error_lines(
         "def iterate(q, g, weight, shift, step, tolerance_orientation, tolerance_position):", chain, dof
     )
-    clipped = [j for j in range(n) if not wraps[j] and not (math.isinf(lower[j]) and math.isinf(upper[j]))]
+    clipped = [j for j in range(n) if not wraps[j] and (has_lower[j] or has_upper[j])]
     for i, r in enumerate(rows):
         lines.append(f"    b{i} = E{r}")
     orientation = [i for i, r in enumerate(rows) if r < 3]
@@ -74,33 +78,33 @@ def ik_iteration_source(
         gradient = _sum([_product(entries[i, j], f"b{i}") for i in range(m)])
         column = " = ".join(held_columns[j])
         conditions = []
-        if not math.isinf(lower[j]):
-            conditions.append(f"(q{j} <= {float(lower[j])!r} and {gradient} < 0.0)")
-        if not math.isinf(upper[j]):
-            conditions.append(f"(q{j} >= {float(upper[j])!r} and {gradient} > 0.0)")
+        if has_lower[j]:
+            conditions.append(f"(q{j} <= LO{j} and {gradient} < 0.0)")
+        if has_upper[j]:
+            conditions.append(f"(q{j} >= HI{j} and {gradient} > 0.0)")
         lines.append(f"    if {' or '.join(conditions)}:")
         lines.append(f"        {column} = 0.0")
     body, qdot = damped_solve_lines(entries, m, n)
     lines += [line.replace("return None", "return 2, q, O, P") for line in body]
     for j in range(n):
         lines.append(f"    N{j} = q{j} + step * ({qdot[j]})")
-        low, high = float(lower[j]), float(upper[j])
-        if math.isinf(low) and math.isinf(high):
-            continue
         if wraps[j]:
-            lines.append(f"    if N{j} < {low!r}:")
-            lines.append(f"        N{j} += TWO_PI * ceil(({low!r} - N{j}) / TWO_PI)")
-            lines.append(f"    elif N{j} > {high!r}:")
-            lines.append(f"        N{j} -= TWO_PI * ceil((N{j} - {high!r}) / TWO_PI)")
-        else:
-            if not math.isinf(low):
-                lines.append(f"    if N{j} < {low!r}:")
-                lines.append(f"        N{j} = {low!r}")
-            if not math.isinf(high):
-                lines.append(f"    if N{j} > {high!r}:")
-                lines.append(f"        N{j} = {high!r}")
+            lines.append(f"    if N{j} < LO{j}:")
+            lines.append(f"        N{j} += TWO_PI * ceil((LO{j} - N{j}) / TWO_PI)")
+            lines.append(f"    elif N{j} > HI{j}:")
+            lines.append(f"        N{j} -= TWO_PI * ceil((N{j} - HI{j}) / TWO_PI)")
+            continue
+        if has_lower[j]:
+            lines.append(f"    if N{j} < LO{j}:")
+            lines.append(f"        N{j} = LO{j}")
+        if has_upper[j]:
+            lines.append(f"    if N{j} > HI{j}:")
+            lines.append(f"        N{j} = HI{j}")
     lines.append(f"    return 0, [{', '.join(f'N{j}' for j in range(n))}], O, P")
     return "\n".join(lines) + "\n"
+
+
+_IK_NAMESPACE = {**_GENERATED_MATH, "ceil": math.ceil, "TWO_PI": 2.0 * math.pi}
 
 
 def compile_ik_iteration(
@@ -111,19 +115,24 @@ def compile_ik_iteration(
     upper: Sequence[float],
     wraps: Sequence[bool],
 ) -> Callable | None:
-    """Compile :func:`ik_iteration_source`; None when the chain cannot be fused."""
+    """One IK iteration for these limits (see :func:`ik_iteration_source`); None when the
+    chain cannot be fused. The code is built once per structure (:mod:`manip_kin.kernel_cache`)."""
     if not isinstance(getattr(chain, "source", None), str):
         return None
+    rows = tuple(int(r) for r in rows)
+    wraps = tuple(bool(w) for w in wraps)
+    has_lower = tuple(not math.isinf(v) for v in lower)
+    has_upper = tuple(not math.isinf(v) for v in upper)
     try:
-        source = ik_iteration_source(chain, dof, rows, lower, upper, wraps)
+        template = kernel(
+            "ik iteration",
+            (chain.source, dof, rows, has_lower, has_upper, wraps),
+            lambda: ik_iteration_source(chain, dof, rows, has_lower, has_upper, wraps),
+            "iterate",
+            _IK_NAMESPACE,
+        )
     except ValueError:
         return None
-    namespace: dict = {
-        **_GENERATED_MATH,
-        "ceil": math.ceil,
-        "TWO_PI": 2.0 * math.pi,
-    }
-    exec(compile(source, "<manip_kin ik iteration>", "exec"), namespace)  # noqa: S102 - our own source
-    function = namespace["iterate"]
-    function.source = source
-    return function
+    values = {f"LO{j}": float(lower[j]) for j in range(dof) if has_lower[j] or wraps[j]}
+    values.update({f"HI{j}": float(upper[j]) for j in range(dof) if has_upper[j] or wraps[j]})
+    return bind(template, values)

@@ -110,18 +110,9 @@ class IKProblem:
         return held
 
 
-_PROBLEMS: dict[tuple[int, int, tuple[int, ...]], tuple[RobotModel, IKProblem]] = {}
-
-
 def problem_for(model: RobotModel, frame_index: int, task: Task) -> IKProblem:
-    """The cached :class:`IKProblem` of (model, frame, task), built on first use."""
-    key = (id(model), frame_index, task.rows)
-    cached = _PROBLEMS.get(key)
-    if cached is not None and cached[0] is model:
-        return cached[1]
-    problem = IKProblem(model, frame_index, task)
-    _PROBLEMS[key] = (model, problem)  # the model is kept so its id is not reused
-    return problem
+    """The :class:`IKProblem` of (model, frame, task), built on first use (kept in ``model.kernels``)."""
+    return model.kernels.get(("ik problem", frame_index, task.rows), IKProblem, model, frame_index, task)
 
 
 def _reach_bound(model: RobotModel, frame_index: int) -> float:

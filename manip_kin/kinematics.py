@@ -194,21 +194,22 @@ def _frame_tail(model: RobotModel, frame_index: int) -> tuple[np.ndarray, int]:
 
 
 def compiled_kinematics(model: RobotModel, frame_index: int, with_jacobian: bool, vectorized: bool = False):
-    """The unrolled ``chain(q) -> tuple`` for one frame, built once per model.
+    """The unrolled ``chain(q) -> tuple`` for one frame, built once per model (``model.kernels``).
 
     With ``vectorized`` it runs on one numpy array of configurations per joint (see
     :func:`manip_kin.chain_codegen.compile_chain`).
     """
-    key = (frame_index, with_jacobian, vectorized)
-    function = model.compiled.get(key)
-    if function is None:
-        from manip_kin.chain_codegen import compile_chain
+    return model.kernels.get(
+        ("kinematics", frame_index, with_jacobian, vectorized), _chain_of, model, frame_index, with_jacobian, vectorized
+    )
 
-        tail, count = _frame_tail(model, frame_index)
-        revolute = [bool(flag) for flag in model.chain.revolute_mask]
-        function = compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian, vectorized=vectorized)
-        model.compiled[key] = function
-    return function
+
+def _chain_of(model: RobotModel, frame_index: int, with_jacobian: bool, vectorized: bool):
+    from manip_kin.chain_codegen import compile_chain
+
+    tail, count = _frame_tail(model, frame_index)
+    revolute = [bool(flag) for flag in model.chain.revolute_mask]
+    return compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian, vectorized=vectorized)
 
 
 def pose_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> np.ndarray:

@@ -23,6 +23,7 @@ from enum import Enum
 import numpy as np
 
 from manip_kin.errors import JointCountError, ModelFileError, UnknownFrameError, check_finite
+from manip_kin.model_kernels import ModelKernels
 from manip_kin.rotations import rotation_z_onto
 
 
@@ -157,8 +158,9 @@ class RobotModel:
     lower: np.ndarray = field(init=False, repr=False, compare=False)
     upper: np.ndarray = field(init=False, repr=False, compare=False)
     velocity_limits: np.ndarray = field(init=False, repr=False, compare=False)
-    # Unrolled kinematics per (frame index, with Jacobian), built on first use; see chain_codegen.
-    compiled: dict = field(init=False, repr=False, compare=False, default_factory=dict)
+    # What is built from the model on first use (its generated kinematics, IK problems): an
+    # object of its own, so the model's fields never change (see manip_kin.model_kernels).
+    kernels: ModelKernels = field(init=False, repr=False, compare=False, default_factory=ModelKernels)
 
     def __post_init__(self):
         if not self.joints:

@@ -145,10 +145,10 @@ def default_task(model: RobotModel, frame: str | int | None = None) -> Task:
     """
     if model.dof >= 6:
         return FULL_TASK
-    key = (id(model), frame)
-    cached = _DEFAULT_CACHE.get(key)
-    if cached is not None and cached[0] is model:
-        return cached[1]
+    return model.kernels.get(("default task", frame), _achievable_task, model, frame)
+
+
+def _achievable_task(model: RobotModel, frame: str | int | None) -> Task:
     from manip_kin.kinematics import jacobian
 
     rng = np.random.default_rng(0)
@@ -156,9 +156,4 @@ def default_task(model: RobotModel, frame: str | int | None = None) -> Task:
     for _ in range(5):
         angular += np.abs(jacobian(model, model.random_configuration(rng), frame).angular).sum(axis=1)
     rotating = tuple(int(r) for r in np.flatnonzero(angular > 1e-9))
-    task = Task(rotating + (3, 4, 5)) if 3 + len(rotating) <= model.dof else Task((3, 4, 5))
-    _DEFAULT_CACHE[key] = (model, task)  # the model is kept so its id is not reused
-    return task
-
-
-_DEFAULT_CACHE: dict[tuple, tuple[RobotModel, Task]] = {}
+    return Task(rotating + (3, 4, 5)) if 3 + len(rotating) <= model.dof else Task((3, 4, 5))

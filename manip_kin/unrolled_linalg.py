@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-_DAMPED_CACHE: dict[tuple, tuple[Callable, Callable]] = {}
+from manip_kin.kernel_cache import kernel
 
 
 def _cholesky_body(m: int, shifted: bool = True) -> list[str]:
@@ -133,17 +133,6 @@ def chain_constants(chain: Callable, dof: int, samples: int = 3, seed: int = 0) 
     }
 
 
-_CONSTANTS_CACHE: dict[int, tuple[Callable, dict[int, float]]] = {}
-
-
-def _constants_of(chain: Callable, dof: int) -> dict[int, float]:
-    cached = _CONSTANTS_CACHE.get(id(chain))
-    if cached is None or cached[0] is not chain:
-        cached = (chain, chain_constants(chain, dof))
-        _CONSTANTS_CACHE[id(chain)] = cached
-    return cached[1]
-
-
 def _product(a: float | str, b: float | str) -> float | str:
     """``a * b`` as a constant or an expression; names may carry a leading minus (folded)."""
     if isinstance(a, float) and isinstance(b, float):
@@ -164,12 +153,29 @@ def _product(a: float | str, b: float | str) -> float | str:
     return f"-{product}" if negative else product
 
 
+#: Terms per bracket in a generated sum: ``a + b + …`` nests one level of the syntax tree per
+#: term, and Python's compiler recurses on it (a 3000-joint chain's ``J Jᵀ`` entries hit its
+#: recursion limit). Longer sums are bracketed in groups; sums of up to this many terms (every
+#: arm's) are left as they are, so their floating-point result does not change.
+SUM_GROUP = 64
+
+
 def _sum(terms: Sequence[float | str]) -> str:
-    """``Σ terms`` as an expression: constants added up, negative terms subtracted."""
+    """``Σ terms`` as an expression: constants added up, negative terms subtracted.
+
+    More than :data:`SUM_GROUP` terms are summed in brackets of that many, so the expression's
+    nesting stays shallow however many joints the chain has.
+    """
     constant = sum(t for t in terms if isinstance(t, float))
     parts = [t for t in terms if not isinstance(t, float)]
     if constant != 0.0 or not parts:
         parts.append(repr(constant))
+    while len(parts) > SUM_GROUP:
+        parts = [f"({_joined(parts[i : i + SUM_GROUP])})" for i in range(0, len(parts), SUM_GROUP)]
+    return _joined(parts)
+
+
+def _joined(parts: Sequence[str]) -> str:
     expression = parts[0]
     for part in parts[1:]:
         expression += f" - {part[1:]}" if part.startswith("-") else f" + {part}"
@@ -275,15 +281,11 @@ def damped_solver(
         precision, or NaN in the input).
     """
     rows = tuple(int(r) for r in rows)
-    key = (id(chain), dof, rows, offset, inverse_trace, fold_constants)
-    cached = _DAMPED_CACHE.get(key)
-    if cached is not None and cached[0] is chain:
-        return cached[1]
-    constants = _constants_of(chain, dof) if fold_constants else {}
-    source = _damped_solve_source(dof, rows, constants, offset, inverse_trace)
-    namespace: dict = {"sqrt": math.sqrt}
-    exec(compile(source, "<manip_kin damped solve>", "exec"), namespace)  # noqa: S102 - our own source
-    solver = namespace["solve"]
-    # The chain is kept alongside so its id cannot be reused by another object.
-    _DAMPED_CACHE[key] = (chain, solver)
-    return solver
+
+    def source() -> str:
+        constants = chain_constants(chain, dof) if fold_constants else {}
+        return _damped_solve_source(dof, rows, constants, offset, inverse_trace)
+
+    # The chain's source is its structure (the folded constants come from it).
+    key = (chain.source, dof, rows, offset, inverse_trace, fold_constants)
+    return kernel("damped solve", key, source, "solve", {"sqrt": math.sqrt})

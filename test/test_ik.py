@@ -16,10 +16,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kin_reference import dh_fk, homogeneous, poe_fk, rodrigues
 
-from manip_kin.control import pose_error
+from manip_kin.closed_form import closed_form_solutions
+from manip_kin.control import CartesianController, pose_error
 from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError
 from manip_kin.ik import IK_METHODS, solve_ik
-from manip_kin.kinematics import KinematicsData, forward_kinematics
+from manip_kin.kinematics import KinematicsData, forward_kinematics, jacobian
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform
 from manip_kin.tasks import parse_task
@@ -81,8 +82,14 @@ def test_scara_newton_raphson_from_the_three_guesses(initial):
 
 
 def test_scara_stretched_start_is_singular():
-    """The first guess really is singular: the planar Jacobian loses rank when q2 = 0."""
-    jacobian = np.array(
+    """The first guess really is singular: the planar Jacobian loses rank when q2 = 0, in the
+    model (its Jacobian, and the controller's flag) as in the product of exponentials."""
+    model = load_robot("scara")
+    stretched = np.zeros(4)
+    # The model is the robots.md arm: its FK agrees with the typed-in screws.
+    for q in (stretched, np.array([0.3, -0.7, 0.1, 0.5])):
+        np.testing.assert_allclose(reference_pose(model, q), poe_fk(SCARA_SCREWS, SCARA_HOME, q), atol=1e-12)
+    oracle = np.array(
         [
             (
                 poe_fk(SCARA_SCREWS, SCARA_HOME, np.eye(4)[j] * 1e-6)[:2, 3]
@@ -92,7 +99,15 @@ def test_scara_stretched_start_is_singular():
             for j in (0, 1)
         ]
     ).T
-    assert abs(np.linalg.det(jacobian)) < 1e-9
+    planar = jacobian(model, stretched).linear[:2, :2]  # x, y rates of the two arm joints
+    np.testing.assert_allclose(planar, oracle, atol=1e-8)
+    assert abs(np.linalg.det(planar)) < 1e-12
+    # Bent by q2 the determinant is l1 l2 sin q2 = 0.25 sin q2.
+    bent = jacobian(model, [0.0, 0.5, 0.0, 0.0]).linear[:2, :2]
+    assert np.linalg.det(bent) == pytest.approx(0.25 * math.sin(0.5), rel=1e-9)
+    goal = reference_pose(model, [0.2, 0.4, 0.05, 0.0])
+    output = CartesianController(model).step(stretched, goal)
+    assert output.singular and output.damping > 0.0 and output.manipulability < 1e-9
 
 
 def irb120_reference_pose(q) -> np.ndarray:
@@ -163,11 +178,20 @@ def rpp_closed_form(position) -> np.ndarray:
 
 
 def test_rpp_closed_form_matches_the_dh_table():
+    """The model is the robots.md DH table, and the package's closed form inverts it (as the
+    oracle the next test relies on does)."""
     rng = np.random.default_rng(20)
     model = load_robot("rpp")
+    frame = model.frame_index(model.default_frame)
+    task = parse_task(None, model)
     for _ in range(20):
         q = model.random_configuration(rng)
-        np.testing.assert_allclose(rpp_closed_form(dh_fk(RPP_DH, q)[:3, 3]), q, atol=1e-12)
+        table = dh_fk(RPP_DH, q)
+        np.testing.assert_allclose(reference_pose(model, q)[:3, 3], table[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(rpp_closed_form(table[:3, 3]), q, atol=1e-12)
+        found = closed_form_solutions(model, table, frame, task)
+        assert found is not None and found.solver == "closed_form:rpp"
+        assert any(np.allclose(solution.q, q, atol=1e-9) for solution in found.solutions), found
 
 
 def test_rpp_agrees_with_the_closed_form():

@@ -33,7 +33,6 @@ from manip_kin.tasks import Task
 
 DETECTORS = (detect_rpp, detect_scara, detect_opw)
 LIMIT_TOLERANCE = 1e-9  # [rad | m] a value this far outside a limit is put on it
-_SOLVERS: dict[tuple[int, int], tuple[RobotModel, object]] = {}
 
 
 @dataclass(frozen=True)
@@ -73,20 +72,18 @@ class ClosedFormResult:
 
 
 def closed_form_solver(model: RobotModel, frame_index: int):
-    """The closed-form solver of ``model`` for a frame on its last link, or None (cached per model)."""
-    key = (id(model), frame_index)
-    cached = _SOLVERS.get(key)
-    if cached is not None and cached[0] is model:
-        return cached[1]
-    solver = None
+    """The closed-form solver of ``model`` for a frame on its last link, or None (kept in ``model.kernels``)."""
+    return model.kernels.get(("closed-form solver", frame_index), _detected_solver, model, frame_index)
+
+
+def _detected_solver(model: RobotModel, frame_index: int):
     geometry = chain_geometry(model, frame_index)
     if geometry is not None:
         for detect in DETECTORS:
             solver = detect(geometry)
             if solver is not None:
-                break
-    _SOLVERS[key] = (model, solver)  # the model is kept so its id is not reused
-    return solver
+                return solver
+    return None
 
 
 def solver_for_task(model: RobotModel, frame_index: int, task: Task):
@@ -102,13 +99,11 @@ def solver_for_task(model: RobotModel, frame_index: int, task: Task):
 
 def _joint_choices(model: RobotModel) -> list[tuple[bool, float, float, str]]:
     """Per joint ``(revolute, lower, upper, name)`` as plain floats (cached per model)."""
-    key = (id(model), -1)
-    cached = _SOLVERS.get(key)
-    if cached is None or cached[0] is not model:
-        joints = [(j.is_revolute, float(j.lower), float(j.upper), j.name) for j in model.joints]
-        cached = (model, joints)
-        _SOLVERS[key] = cached
-    return cached[1]
+    return model.kernels.get(("joint choices",), _joint_values, model)
+
+
+def _joint_values(model: RobotModel) -> list[tuple[bool, float, float, str]]:
+    return [(j.is_revolute, float(j.lower), float(j.upper), j.name) for j in model.joints]
 
 
 def _wraps(revolute: bool, lower: float, upper: float, name: str, value: float) -> list[tuple[float, str]]:

@@ -15,13 +15,17 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
+from manip_kin.errors import OperationError
 from manip_kin.nodes.polling import LoopWaiter, PolledSubscription, fast_path_problem
 from manip_kin.nodes.rate_loop import RateLoop, stats_key_values
 from manip_kin.nodes.throttled_log import ThrottledLog, safe_log
 
 
-class LoopGaveUpError(RuntimeError):
-    """Raised in the executor thread when a node's loop gave up; ``run_node`` exits with 1."""
+class LoopGaveUpError(OperationError):
+    """Raised in the executor thread when a node's loop gave up; ``run_node`` exits with 1.
+
+    A valid node that could not go on: an :class:`~manip_kin.errors.OperationError` (still a
+    ``RuntimeError``)."""
 
 
 class LoopingNode(Node):

@@ -18,15 +18,17 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from manip_kin.errors import ManipKinError
+from manip_kin.errors import InputError
 
 #: Default tolerance on ``| |q| - 1 |`` for a goal quaternion: hand-typed quaternions
 #: such as ``0 0.707 0 0.707`` pass, a zero or unnormalised one does not.
 QUATERNION_TOLERANCE = 1e-2
 
 
-class InvalidMessageError(ManipKinError):
-    """A message a node must reject: non-finite values, wrong length, wrong frame, bad quaternion."""
+class InvalidMessageError(InputError):
+    """A message a node must reject: non-finite values, wrong length, wrong frame, bad quaternion.
+
+    Bad input, so an :class:`~manip_kin.errors.InputError` (exit code 2 where it ends a CLI)."""
 
 
 class JointStateMapper:
