@@ -96,6 +96,9 @@ def _errors(status) -> dict:
     if status is None:
         return {"position": None, "orientation": None}
     position, orientation = status.number("position_error"), status.number("orientation_error")
+    closest = status.values.get("unreachable_errors", "").split()
+    if position != position and len(closest) == 2:  # halted at an unreachable goal: the closest pose's
+        position, orientation = float(closest[0]), float(closest[1])
     return {
         "position": None if position != position else position,
         "orientation": None if orientation != orientation else orientation,
