@@ -188,6 +188,20 @@ class CommandFilter:
             self.result = FilterResult.LIMITED
         return self._velocity
 
+    def _landing(self, target: list[float], accelerations: list[float]) -> tuple[list[float], list[float]]:
+        """The sample of a profile that ends within the period: on the target, with the target's
+        acceleration; but held to the sampled stream's limits, which such a landing can exceed
+        by a little (seen: 15 % of the jerk limit), the state then following the held sample."""
+        dt = self.dt
+        velocity, acceleration = list(target), list(accelerations)
+        rows = zip(target, self._velocity, self._fd_acceleration, self._accelerations, self._jerks)
+        for j, (v, old, a_old, bound, jerk) in enumerate(rows):
+            a = (v - old) / dt
+            held = min(max(a, a_old - jerk * dt, -bound), a_old + jerk * dt, bound)
+            if held != a:
+                velocity[j], acceleration[j] = old + held * dt, held
+        return velocity, acceleration
+
     def _within_limits(self, target: list[float]) -> bool:
         """True when stepping straight to ``target`` keeps every joint's finite-difference
         acceleration and jerk within its bounds (from the last command and its acceleration),
@@ -267,8 +281,7 @@ class CommandFilter:
             result = self._ruckig.update(inp, self._output)
         if result == Result.Finished:
             # The target is reached within this period: land on it exactly (an exact zero at rest).
-            velocity = target
-            acceleration = [0.0] * self.dof
+            velocity, acceleration = self._landing(target, list(inp.target_acceleration))
         elif result == Result.Working:
             velocity = list(self._output.new_velocity)
             acceleration = list(self._output.new_acceleration)
