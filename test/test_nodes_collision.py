@@ -6,10 +6,13 @@ objects for the Panda's hand and link 1; over every position the fake arm integr
 """
 
 import math
+import os
+import re
 
 import numpy as np
 import pytest
 from collision_robots import (
+    BALL_ARM_SPHERES,
     BALL_ARM_URDF,
     PANDA_FOLDED,
     PANDA_READY,
@@ -18,13 +21,20 @@ from collision_robots import (
     panda_files,
     point_box_distance,
 )
+from fake_hardware import FakeHardware
+from geometry_msgs.msg import PoseStamped
 from held_arm import send_goal, start_held_arm
 from node_harness import Harness, statuses
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
+from manip_kin.joint_trajectory import TrajectoryPoint
 from manip_kin.kinematics import frame_pose
+from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller import CartesianControllerNode
 from manip_kin.nodes.collision_inputs import MARKER_NS
+from manip_kin.nodes.joint_messages import make_joint_trajectory
+from manip_kin.nodes.trajectory_generator import TrajectoryGeneratorNode
 from manip_kin.pipeline.outcome import goal_outcome
 from manip_kin.robots import load_robot
 
@@ -169,3 +179,65 @@ def test_a_self_collision_goal_on_the_panda_ends_blocked_without_contact(harness
 def test_a_bundled_yaml_robot_with_collision_avoidance_is_refused_at_start(harness):
     with pytest.raises(Exception, match="collision_avoidance needs the robot's URDF"):
         harness.start(CartesianControllerNode, robot="genova7", collision_avoidance=True)
+
+
+def _first_tip_contact(start, goal, centre, extents, clearance) -> float:
+    """Where along the tool's straight line the tip sphere (centred on the tool) first comes
+    nearer than ``clearance`` to the box, in closed form (bisection on the line) [0..1]."""
+    radius = BALL_ARM_SPHERES[-1][2]
+    fractions = np.linspace(0.0, 1.0, 100001)
+    points = start[None, :] + fractions[:, None] * (goal - start)[None, :]
+    outside = np.maximum(np.abs(points - centre) - 0.5 * np.asarray(extents), 0.0)
+    near = np.flatnonzero(np.linalg.norm(outside, axis=1) - radius < clearance)
+    return float(fractions[near[0]])
+
+
+def test_the_generator_refuses_a_line_and_a_joint_trajectory_through_a_box(harness, ball_urdf):
+    model = load_robot(ball_urdf)
+    start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
+    centre = 0.5 * (start[:3, 3] + goal[:3, 3])
+    namespace = f"/generator_{os.getpid()}"
+    hardware = FakeHardware(BALL_ARM_URDF, START_Q, rate_hz=200.0, namespace=namespace)
+    try:
+        node = harness.start(
+            TrajectoryGeneratorNode,
+            namespace=namespace,
+            robot=ball_urdf,
+            collision_check=True,
+            collision_safety_distance=SAFETY,
+            task="position",
+        )
+        topic = f"{namespace}/collision_objects"
+        harness.wait_matched(topic, MarkerArray)
+        harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
+        assert harness.spin_until(lambda: len(node.path_check.scene_input.scene) == 1, 3)
+        harness.wait_matched(f"{namespace}/line_target", PoseStamped)
+        harness.publish(
+            f"{namespace}/line_target",
+            conv.make_pose_stamped(goal, "base_link", harness.node.get_clock().now().to_msg()),
+        )
+        assert harness.spin_until(lambda: node.rejected_targets == 1, 5), node.state
+        reason = node.last_rejection
+        percent = float(re.search(r"at (\d+) % of the way", reason).group(1))
+        expected = 100.0 * _first_tip_contact(start[:3, 3], goal[:3, 3], centre, BOX_EXTENTS, SAFETY)
+        assert abs(percent - expected) <= 3.0, (reason, expected)  # samples every centimetre of 41 cm
+        assert "link3 and obstacle:cell/1" in reason and node.supervisor.rejection_kind == "unreachable"
+        # The same motion as a joint trajectory: j1 sweeps from -0.6 to 0.6 through the box too.
+        harness.wait_matched(f"{namespace}/joint_trajectory", JointTrajectory)
+        trajectory = make_joint_trajectory(model.joint_names, [TrajectoryPoint(2.0, GOAL_Q.tolist())])
+        trajectory.header.stamp = harness.node.get_clock().now().to_msg()
+        harness.publish(f"{namespace}/joint_trajectory", trajectory)
+        assert harness.spin_until(lambda: node.rejected_targets == 2, 5), node.state
+        assert "joint trajectory not free of collision" in node.last_rejection
+        assert "% of the way" in node.last_rejection and "obstacle:cell/1" in node.last_rejection
+        # Without the box both are free: the line starts.
+        clear = MarkerArray(markers=[Marker(action=Marker.DELETEALL)])
+        harness.publish(topic, clear)
+        assert harness.spin_until(lambda: len(node.path_check.scene_input.scene) == 0, 3)
+        harness.publish(
+            f"{namespace}/line_target",
+            conv.make_pose_stamped(goal, "base_link", harness.node.get_clock().now().to_msg()),
+        )
+        assert harness.spin_until(lambda: node.state == "streaming", 5), node.last_rejection
+    finally:
+        hardware.close()

@@ -3,7 +3,6 @@
 import math
 from dataclasses import replace
 
-import coal
 import numpy as np
 import pytest
 from collision_robots import (

@@ -68,9 +68,7 @@ class CartesianControllerNode(LoopingNode):
         self.rate_hz = params["rate_hz"]
         self.dt = 1.0 / self.rate_hz
         self.base_frame = params["base_frame"] or self.model.base_frame
-        self.collision = CollisionInputs(
-            self, params, getattr(self, "robot_description_text", None), ThrottledLog(self.get_logger().warning, 1.0)
-        )
+        self.collision = CollisionInputs(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._configure(params)
         config = self.controller.config
         self.supervisor = ControllerSupervisor(

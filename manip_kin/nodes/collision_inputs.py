@@ -26,19 +26,16 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 from visualization_msgs.msg import Marker, MarkerArray
 
-from manip_kin.collision.collision_model import load_collision_model
 from manip_kin.collision.distances import CollisionChecker
 from manip_kin.control import CartesianController
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.nodes.scene_input import SceneInput, node_collision_model
 from manip_kin.qp.blocked import Blocked, blocked_by
 from manip_kin.qp.law import QpConfig, QpController, QpOutput
 from manip_kin.qp.tasks import PostureTask
-from manip_kin.robot_files import is_urdf_file
 from manip_kin.scene import Scene
 
 #: Seconds of pose steps :func:`blocked_by` looks at, and how often it looks [ns].
@@ -47,26 +44,7 @@ BLOCKED_EVERY_NS = 50_000_000
 #: Pose steps further apart than this are not one history (a halt or other commands between);
 #: a loaded machine's late cycles (tens of ms) are not such a gap [ns].
 HISTORY_GAP_NS = 100_000_000
-#: Queued ``collision_objects`` arrays kept for the loop (markers are incremental: keep them all).
-SCENE_DEPTH = 50
 MARKER_NS = "collision"
-
-
-def robot_urdf(params: dict, description_text: str | None) -> str | Path:
-    """The URDF the collision geometry comes from: the ``robot`` file, or the description's text.
-
-    Raises:
-        InvalidArgumentError: ``robot`` names a bundled robot or a robot YAML (no geometry).
-    """
-    robot = params["robot"]
-    if not robot:
-        return description_text
-    if Path(robot).is_file() and is_urdf_file(robot):
-        return Path(robot)
-    raise InvalidArgumentError(
-        f"collision_avoidance needs the robot's URDF <collision> geometry; robot {robot!r} is not a URDF file; "
-        "valid: a URDF path, or robot '' (the URDF on robot_description)"
-    )
 
 
 class CollisionLaw:
@@ -90,9 +68,8 @@ class CollisionInputs:
     """The collision side of one controller node (its loop thread only, but :meth:`configure`).
 
     Args:
-        node: the controller node (its ``model``, ``base_frame`` are read).
+        node: the controller node (its ``model``, ``base_frame``, ``rate_hz`` are read).
         params: the node's checked parameters.
-        description_text: the URDF text when the model came from ``robot_description``.
         warn: a :class:`~manip_kin.nodes.throttled_log.ThrottledLog` for refusals.
 
     Raises:
@@ -100,41 +77,34 @@ class CollisionInputs:
             node exits with code 2 and the message).
     """
 
-    def __init__(self, node, params: dict, description_text: str | None, warn):
+    def __init__(self, node, params: dict, warn):
         self.node = node
-        self._warn = warn
         self.enabled = bool(params["collision_avoidance"])
-        self.scene = Scene()
         self.checker: CollisionChecker | None = None
+        self.scene_input: SceneInput | None = None
         self.law: CollisionLaw | None = None
-        self.rejected_markers = 0
         self._history: deque[QpOutput] = deque(maxlen=max(2, int(BLOCKED_WINDOW_S * node.rate_hz)))
         self._last_check_ns = 0
         self._last_record_ns = 0
-        self._subscription = self._marker_pub = None
+        self._marker_pub = None
+        self._marker_shown = False
         if not self.enabled:
             return
-        from manip_kin.nodes.rate_loop import PolledSubscription
-        from manip_kin.nodes.scene_messages import TOPIC
-
-        model = node.model
-        self.collision_model = load_collision_model(
-            model,
-            robot_urdf(params, description_text),
-            srdf=params["srdf"] or None,
-            mesh_search_path=params["mesh_search_path"],
-            samples=params["collision_pair_samples"],
-        )
-        self.checker = CollisionChecker(model, self.collision_model, params["mesh_search_path"])
-        self._subscription = PolledSubscription(node, MarkerArray, TOPIC, SCENE_DEPTH)
+        collision_model = node_collision_model(node, params, "collision_avoidance", params["collision_pair_samples"])
+        self.checker = CollisionChecker(node.model, collision_model, params["mesh_search_path"])
+        self.scene_input = SceneInput(node, self.checker, warn)
         self._marker_pub = node.create_publisher(MarkerArray, "markers", 10)
-        pairs = self.collision_model.pairs
         node.get_logger().info(
-            f"collision avoidance: {len(self.collision_model.geometries)} shapes on "
-            f"{len(self.collision_model.links)} links, {len(pairs.checked)} link pairs checked "
+            f"collision avoidance: {len(collision_model.geometries)} shapes on {len(collision_model.links)} links, "
+            f"{len(collision_model.pairs.checked)} link pairs checked "
             f"({'SRDF ' + params['srdf'] if params['srdf'] else 'pairs by sampling'}); obstacles on "
-            f"{self._subscription.subscription.topic_name}"
+            f"{self.scene_input.topic}"
         )
+
+    @property
+    def scene(self) -> Scene:
+        """The obstacles taken so far (empty without collision avoidance)."""
+        return self.scene_input.scene if self.scene_input is not None else Scene()
 
     # --- configuration --------------------------------------------------------------------------
 
@@ -176,19 +146,9 @@ class CollisionInputs:
     # --- each cycle -----------------------------------------------------------------------------
 
     def take(self) -> None:
-        """Apply every queued ``collision_objects`` array in order; the checker takes the scene."""
-        if self._subscription is None:
-            return
-        from manip_kin.nodes.scene_messages import apply_marker_array
-
-        while (msg := self._subscription.take()) is not None:
-            problems = apply_marker_array(self.scene, msg, self.node.base_frame)
-            if problems:
-                self.rejected_markers += len(problems)
-                topic = self._subscription.subscription.topic_name
-                self._warn("collision_objects", f"refused on {topic}: {'; '.join(problems)[:400]}")
-        if self.checker.update_scene(self.scene) and self.checker.scene_problems:
-            self._warn("collision_scene", f"obstacles left out: {'; '.join(self.checker.scene_problems)[:400]}")
+        """Apply the queued ``collision_objects`` (see :class:`~manip_kin.nodes.scene_input.SceneInput`)."""
+        if self.scene_input is not None:
+            self.scene_input.take()
 
     def pose_step_done(self, output, now_ns: int) -> Blocked | None:
         """Keep a pose step's output; every ~50 ms, the blocking pair over the last 0.3 s, if any
@@ -221,11 +181,13 @@ class CollisionInputs:
 
     def key_values(self, output) -> list[tuple[str, str]]:
         """The ``/diagnostics`` values of the last step's ``output`` (empty strings without the QP law)."""
+        scene = [
+            ("obstacles", str(len(self.scene))),
+            ("rejected_obstacles", str(self.scene_input.refused if self.scene_input is not None else 0)),
+        ]
         if self.law is None or not isinstance(output, QpOutput):
-            return [(key, "") for key in ("nearest_pair", "nearest_distance", "qp_status", "qp_fallbacks")] + [
-                ("active_constraints", ""),
-                ("obstacles", str(len(self.scene))),
-            ]
+            keys = ("nearest_pair", "nearest_distance", "qp_status", "qp_fallbacks", "active_constraints")
+            return [(key, "") for key in keys] + scene
         pair = "-".join(output.nearest_pair) if output.nearest_pair else ""
         return [
             ("nearest_pair", pair),
@@ -233,18 +195,21 @@ class CollisionInputs:
             ("qp_status", str(output.status)),
             ("qp_fallbacks", str(output.fallback_count)),
             ("active_constraints", ",".join(output.active_constraints)),
-            ("obstacles", str(len(self.scene))),
+            *scene,
         ]
 
     def publish_marker(self, stamp, output) -> None:
-        """The nearest pair as a LINE_LIST on ``markers`` (deleted when no pair is near)."""
+        """The nearest pair as a LINE_LIST on ``markers`` (deleted once when no pair is near any more)."""
         if self._marker_pub is None:
             return
+        nearest = self._nearest(output)
+        if nearest is None and not self._marker_shown:
+            return
+        self._marker_shown = nearest is not None
         marker = Marker()
         marker.header.stamp = stamp
         marker.header.frame_id = self.node.base_frame
         marker.ns, marker.id = MARKER_NS, 0
-        nearest = self._nearest(output)
         if nearest is None:
             marker.action = Marker.DELETE
         else:
@@ -258,7 +223,9 @@ class CollisionInputs:
         self._marker_pub.publish(MarkerArray(markers=[marker]))
 
     def _nearest(self, output):
-        if self.law is None or self.checker is None or getattr(output, "nearest_pair", None) is None:
+        if self.law is None or self.checker is None or self.node.q is None:
+            return None
+        if getattr(output, "nearest_pair", None) is None:
             return None
         # The witness points again, at the status rate (the step's output keeps only the pair).
         near = self.checker.pair_distances(self.node.q, self.law.qp.config.influence_distance)
