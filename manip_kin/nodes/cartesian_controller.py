@@ -541,9 +541,8 @@ class CartesianControllerNode(LoopingNode):
             ("braking_joints", ",".join(self.model.joint_names[i] for i in self.command_filter.braking_joints)),
             ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),
             ("loop_error", self.loop_error()),
-            *self.collision.key_values(self.output),
+            *self.collision.report(self.get_clock().now().to_msg(), self.output),
         ] + stats_key_values(self.loop.stats())
-        self.collision.publish_marker(self.get_clock().now().to_msg(), self.output)
         level = self.diagnostic_level(self.supervisor.level)
         status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)
         self._diagnostics_pub.publish(conv.make_diagnostic_array(self.get_clock().now().to_msg(), [status]))

@@ -179,31 +179,32 @@ class CollisionInputs:
 
     # --- status ---------------------------------------------------------------------------------
 
-    def key_values(self, output) -> list[tuple[str, str]]:
-        """The ``/diagnostics`` values of the last step's ``output`` (empty strings without the QP law)."""
+    def report(self, stamp, output) -> list[tuple[str, str]]:
+        """The ``/diagnostics`` values of the last step's ``output`` (empty strings without the QP
+        law), and the nearest pair's marker on ``markers`` (deleted once no pair is near any more)."""
         scene = [
             ("obstacles", str(len(self.scene))),
             ("rejected_obstacles", str(self.scene_input.refused if self.scene_input is not None else 0)),
         ]
         if self.law is None or not isinstance(output, QpOutput):
-            keys = ("nearest_pair", "nearest_distance", "qp_status", "qp_fallbacks", "active_constraints")
-            return [(key, "") for key in keys] + scene
-        pair = "-".join(output.nearest_pair) if output.nearest_pair else ""
+            keys = ("nearest_pair", "nearest_distance", "nearest_points", "qp_status", "qp_fallbacks")
+            return [(key, "") for key in (*keys, "active_constraints", "collision_safety_distance")] + scene
+        nearest = self._nearest(output)
+        self._publish_marker(stamp, nearest)
+        points = "" if nearest is None else " ".join(f"{v:.5f}" for v in (*nearest.point_first, *nearest.point_second))
         return [
-            ("nearest_pair", pair),
+            ("nearest_pair", "-".join(output.nearest_pair) if output.nearest_pair else ""),
             ("nearest_distance", f"{output.nearest_distance:.6f}" if math.isfinite(output.nearest_distance) else ""),
+            ("nearest_points", points),
             ("qp_status", str(output.status)),
             ("qp_fallbacks", str(output.fallback_count)),
             ("active_constraints", ",".join(output.active_constraints)),
+            ("collision_safety_distance", f"{self.law.qp.config.collision_safety_distance:g}"),
             *scene,
         ]
 
-    def publish_marker(self, stamp, output) -> None:
-        """The nearest pair as a LINE_LIST on ``markers`` (deleted once when no pair is near any more)."""
-        if self._marker_pub is None:
-            return
-        nearest = self._nearest(output)
-        if nearest is None and not self._marker_shown:
+    def _publish_marker(self, stamp, nearest) -> None:
+        if self._marker_pub is None or (nearest is None and not self._marker_shown):
             return
         self._marker_shown = nearest is not None
         marker = Marker()
@@ -223,11 +224,10 @@ class CollisionInputs:
         self._marker_pub.publish(MarkerArray(markers=[marker]))
 
     def _nearest(self, output):
-        if self.law is None or self.checker is None or self.node.q is None:
+        """The nearest pair with its witness points at the node's newest ``q`` (computed again at
+        the status rate: the step's output keeps only the pair's names), or None."""
+        if self.checker is None or self.node.q is None or output.nearest_pair is None:
             return None
-        if getattr(output, "nearest_pair", None) is None:
-            return None
-        # The witness points again, at the status rate (the step's output keeps only the pair).
         near = self.checker.pair_distances(self.node.q, self.law.qp.config.influence_distance)
         return min(near, key=lambda pair: pair.distance) if near else None
 
