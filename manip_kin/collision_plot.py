@@ -3,7 +3,8 @@
 Drawn when the recording holds the controller's collision status (``nearest_pair`` on
 ``/diagnostics``, from a ``cartesian_controller`` with ``collision_avoidance``):
 
-* left, in 3D: the arm (from the recording's ``/tf``) at the start and at the nearest approach,
+* left, in 3D: the arm (from the recording's ``/tf``, else from ``robot_description`` and the
+  joint states) at the start and at the nearest approach,
   the obstacles of ``collision_objects`` at the end of the run (boxes, spheres and cylinders as
   wireframes, a mesh as a box of its scale), and the nearest pair's witness points joined by
   a line at the nearest approach;
@@ -129,8 +130,37 @@ def _draw_obstacle(axis, obstacle, colour) -> np.ndarray:
     return np.vstack(edges)
 
 
+def arm_from_joint_states(run) -> ArmFrames | None:
+    """The arm's frame origins from ``robot_description`` and the joint states of a
+    :class:`~manip_kin.plotting.RunData` (for a recording without ``/tf``), or None."""
+    from manip_kin.errors import ManipKinError
+    from manip_kin.kinematics import frame_poses
+    from manip_kin.urdf import load_urdf_string
+
+    if not run.robot_description or not len(run.joint_time):
+        return None
+    try:
+        model = load_urdf_string(run.robot_description, source="/robot_description")
+    except ManipKinError:
+        return None
+    by_name = [run.joint_names.index(name) for name in model.joint_names if name in run.joint_names]
+    if len(by_name) != model.dof:
+        return None
+    positions = np.array([frame_poses(model, q[by_name])[: model.dof + 2, :3, 3] for q in run.joint_position])
+    frames = ("base", *model.joint_names, "ee")
+    edges = tuple((k, k + 1) for k in range(len(frames) - 1))
+    return ArmFrames(run.joint_time, np.zeros(len(run.joint_time), dtype=np.int64), frames, positions, edges)
+
+
 def plot_collision(arm: ArmFrames | None, scene, nearest: NearestSeries, out: str | Path, title: str = "") -> Path:
-    """Write the figure (see the module docstring) to ``out``; returns its path."""
+    """Write the figure (see the module docstring) to ``out``; returns its path.
+
+    Args:
+        arm: the arm over time (:func:`~manip_kin.arm_animation.load_arm_frames` or
+            :func:`arm_from_joint_states`), or None (not drawn).
+        scene: the obstacles (:func:`manip_kin.plant.render.recorded_scene`), or None.
+        nearest: the controller's nearest pair (:func:`load_nearest`).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
