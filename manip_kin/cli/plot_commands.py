@@ -96,13 +96,14 @@ def run_plot(args: argparse.Namespace) -> int:
 
 def _collision_figure(source: Path, run, out_dir: Path, args) -> list[Path]:
     """``collision.png`` when the recording holds the controller's nearest pair; else nothing."""
-    from manip_kin.collision_plot import load_nearest, plot_collision
+    from manip_kin.collision_plot import arm_from_joint_states, load_nearest, plot_collision
     from manip_kin.plant.render import recorded_scene
 
     nearest = load_nearest(source, args.namespace)
     if not len(nearest.time):
         return []
     scene = recorded_scene(source, args.namespace)
-    path = plot_collision(run.arm, scene, nearest, out_dir / COLLISION_FIGURE, title=args.title or source.stem)
+    arm = run.arm or arm_from_joint_states(run)
+    path = plot_collision(arm, scene, nearest, out_dir / COLLISION_FIGURE, title=args.title or source.stem)
     print(path)
     return [path]
