@@ -22,7 +22,7 @@ from collision_robots import (
     point_box_distance,
 )
 from fake_hardware import FakeHardware
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, TwistStamped
 from held_arm import send_goal, start_held_arm
 from node_harness import Harness, statuses
 from trajectory_msgs.msg import JointTrajectory
@@ -128,6 +128,35 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         nearest = min(_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history))
         assert nearest >= SAFETY - 1e-3, nearest
         assert nearest < SAFETY + 0.01  # it did go up to the box
+    finally:
+        hardware.close()
+
+
+def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball_urdf):
+    model = load_robot(ball_urdf)
+    start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
+    centre = 0.5 * (start[:3, 3] + goal[:3, 3])
+    model, hardware, node, _ = start_held_arm(
+        harness, ball_urdf, START_Q, collision_avoidance=True, collision_pair_samples=100, task="position"
+    )
+    try:
+        topic = f"{node.test_namespace}/collision_objects"
+        harness.wait_matched(topic, MarkerArray)
+        harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
+        assert harness.spin_until(lambda: len(node.collision.scene) == 1, 3)
+        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])  # 0.1 m/s
+        harness.wait_matched(f"{node.test_namespace}/twist_command", TwistStamped)
+
+        def send():
+            stamp = harness.node.get_clock().now().to_msg()
+            harness.publish(
+                f"{node.test_namespace}/twist_command", conv.make_twist_stamped((0, 0, 0), towards, "base_link", stamp)
+            )
+
+        harness.spin_for(3.0, every=send)  # 0.3 m of commanded travel: the box is 0.1 m away
+        distances = [_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history)]
+        assert min(distances) >= SAFETY - 1e-3, min(distances)
+        assert distances[-1] < SAFETY + 0.01  # it went up to the box
     finally:
         hardware.close()
 
