@@ -113,6 +113,8 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         state, values = _reported(harness, diagnostics, node, "blocked")
         outcome = goal_outcome(values, state, stamp)
         assert outcome.word == "blocked" and outcome.exit_code == 1 and "obstacle:cell/1" in outcome.reason
+        held_off = np.linalg.norm(frame_pose(model, hardware.positions())[:3, 3] - goal[:3, 3])
+        assert float(values["position_error"]) == pytest.approx(held_off, abs=2e-3)  # where it was held off
         assert values["nearest_pair"].endswith("obstacle:cell/1")
         assert float(values["nearest_distance"]) == pytest.approx(SAFETY, abs=5e-3)
         assert harness.spin_until(lambda: node.command_filter.at_rest, 3)  # blocked: at rest
@@ -201,6 +203,26 @@ def test_a_self_collision_goal_on_the_panda_ends_blocked_without_contact(harness
         assert values["nearest_pair"] == "panda_link1-panda_hand"
         assert math.isfinite(float(values["nearest_distance"]))
         assert values["qp_fallbacks"] == "0" and values["qp_status"]
+    finally:
+        hardware.close()
+
+
+def test_the_collision_geometry_comes_from_robot_description_when_robot_is_empty(harness):
+    namespace = f"/description_{os.getpid()}"
+    hardware = FakeHardware(BALL_ARM_URDF, START_Q, rate_hz=200.0, namespace=namespace)
+    try:
+        node = harness.start(
+            CartesianControllerNode,
+            namespace=namespace,
+            robot="",
+            collision_avoidance=True,
+            collision_pair_samples=100,
+            task="position",
+        )
+        # The URDF's <collision> elements: the base box, link1's cylinder, the two spheres.
+        shapes = {g.link: str(g.shape.kind) for g in node.collision.checker.collision_model.geometries}
+        assert shapes == {"base_link": "box", "link1": "cylinder", "link2": "sphere", "link3": "sphere"}
+        assert node.law is not node.controller
     finally:
         hardware.close()
 

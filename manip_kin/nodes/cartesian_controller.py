@@ -519,7 +519,9 @@ class CartesianControllerNode(LoopingNode):
         if supervisor.goal_kind is GoalKind.JOINT:
             values = self._joint_values(supervisor.active and self.joint_output is not None)
         else:
-            values = self._pose_values(supervisor.active and self.output is not None)
+            # Blocked: the errors where the arm was held off, for the outcome's words.
+            held_off = supervisor.state is ControllerState.BLOCKED
+            values = self._pose_values((supervisor.active or held_off) and self.output is not None)
         values += [
             ("goal_kind", supervisor.goal_kind or ""),
             ("task", self.controller.task.name),
