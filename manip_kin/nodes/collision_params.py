@@ -15,7 +15,7 @@ SAFETY_DISTANCE = ParamSpec(
     "collision_safety_distance",
     "float",
     0.02,
-    "closest allowed approach of any checked pair (link-link, link-obstacle); below collision_influence_distance",
+    "closest allowed approach of any checked pair, link-link or link-obstacle (on the controller: below collision_influence_distance)",
     "m",
     minimum=0.0,
     maximum=0.5,
