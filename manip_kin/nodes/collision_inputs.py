@@ -82,7 +82,6 @@ class CollisionInputs:
         self.enabled = bool(params["collision_avoidance"])
         self.checker: CollisionChecker | None = None
         self.scene_input: SceneInput | None = None
-        self.law: CollisionLaw | None = None
         self._history: deque[QpOutput] = deque(maxlen=max(2, int(BLOCKED_WINDOW_S * node.rate_hz)))
         self._last_check_ns = 0
         self._last_record_ns = 0
@@ -102,6 +101,12 @@ class CollisionInputs:
         )
 
     @property
+    def law(self) -> CollisionLaw | None:
+        """The QP law the node steps now, or None (the plain law)."""
+        law = getattr(self.node, "law", None)
+        return law if isinstance(law, CollisionLaw) else None
+
+    @property
     def scene(self) -> Scene:
         """The obstacles taken so far (empty without collision avoidance)."""
         return self.scene_input.scene if self.scene_input is not None else Scene()
@@ -109,7 +114,9 @@ class CollisionInputs:
     # --- configuration --------------------------------------------------------------------------
 
     def configure(self, model, params: dict, plain: CartesianController, dt: float):
-        """The law the controller steps: the QP (collision avoidance or a posture), else ``plain``.
+        """The law the controller is to step: the QP (collision avoidance or a posture), else
+        ``plain``. Nothing changes here: the node swaps its ``law`` once its whole
+        configuration is built (a refused change keeps the old one).
 
         Raises:
             ManipKinError: a posture of the wrong length, distances that do not fit (the
@@ -120,7 +127,6 @@ class CollisionInputs:
         if reference:
             posture = PostureTask(np.array(reference, dtype=float), params["posture_gain"], params["posture_weight"])
         if not (self.enabled or posture is not None):
-            self.law = None
             return plain
         config = QpConfig(
             controller=plain.config,
@@ -133,9 +139,8 @@ class CollisionInputs:
         )
         qp = QpController(model, config, self.checker)
         if self.law is not None:
-            qp.fallback_count = self.law.qp.fallback_count
-        self.law = CollisionLaw(qp, plain, dt)
-        return self.law
+            qp.fallback_count = self.law.qp.fallback_count  # counted over the node's life
+        return CollisionLaw(qp, plain, dt)
 
     def switch_problem(self) -> str | None:
         """Why ``~/reload_robot_description`` cannot switch models (the geometry is built at start)."""
