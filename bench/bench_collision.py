@@ -17,6 +17,7 @@ machine preemption puts milliseconds into the wall-clock tail that are not the s
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -200,9 +201,99 @@ def benchmark_solvers(problems: int = 300) -> dict:
     return row
 
 
+def _obstacle_arguments(hand: np.ndarray) -> list[list[str]]:
+    """The three obstacles of :func:`_panda_scene` as ``manip_kin obstacle add`` arguments."""
+
+    def xyz(values) -> list[str]:
+        return [f"{v:.4f}" for v in values]
+
+    return [
+        ["--shape", "sphere", "--size", "0.12", "--xyz", *xyz(hand + [0.16, 0.0, -0.05])],
+        ["--shape", "cylinder", "--size", "0.08", "0.8", "--xyz", *xyz([0.35, 0.45, 0.4])],
+        ["--shape", "box", "--size", "1.2", "1.2", "0.04", "--xyz", *xyz([0.3, 0.0, -0.03])],
+    ]
+
+
+def benchmark_controller_cpu(windows: int = 3, window_s: float = 4.0) -> list[dict]:
+    """cartesian_controller's process CPU at 1 kHz on the Panda, with and without collision_avoidance.
+
+    The pipeline (robot_state, cartesian_controller, trajectory_generator) runs as processes;
+    the three obstacles go on ``collision_objects``; goals alternate every 0.6 s between three
+    poses near the sphere, so the law keeps tracking (a blocked goal would halt it). CPU is
+    utime + stime of the controller process over each window.
+    """
+    import subprocess
+    import sysconfig
+
+    from bench_nodes import _cpu_seconds
+    from collision_robots import PANDA_READY, panda_files
+
+    from manip_kin.kinematics import frame_pose
+    from manip_kin.pipeline import Pipeline, pipeline_processes
+    from manip_kin.urdf import load_urdf
+
+    manip_kin = str(Path(sysconfig.get_path("scripts")) / "manip_kin")
+    urdf, srdf, share = panda_files()
+    model = load_urdf(urdf)
+    hand = frame_pose(model, PANDA_READY, "ee")
+    goals = []
+    for offset in ((0.08, 0.0, -0.04), (0.0, 0.2, 0.0), (0.05, -0.15, -0.1)):
+        goal = hand.copy()
+        goal[:3, 3] += offset
+        goals.append(goal)
+    rows = []
+    for aware in (True, False):
+        controller = {"gain_linear": 2.0, "gain_angular": 2.0}
+        if aware:
+            controller.update(collision_avoidance=True, srdf=str(srdf), mesh_search_path=share)
+        processes = pipeline_processes(
+            str(urdf), rate_hz=1000.0, initial_positions=PANDA_READY.tolist(), controller=controller
+        )
+        pipeline = Pipeline(processes).start()
+        try:
+            # The plain law has no collision_objects subscriber (nor use for it).
+            for k, arguments in enumerate(_obstacle_arguments(hand[:3, 3]) if aware else ()):
+                subprocess.run(
+                    [manip_kin, "obstacle", "add", "--id", str(k + 1), *arguments, "--frame", model.base_frame],
+                    capture_output=True,
+                    timeout=30,
+                    check=True,
+                )
+            client = pipeline.client()
+            pid = pipeline.pid("cartesian_controller")
+            percents = []
+            for _ in range(windows):
+                start_cpu, start, sent = _cpu_seconds(pid), time.monotonic(), 0
+                while time.monotonic() - start < window_s:
+                    client.send_goal(goals[sent % len(goals)], model.base_frame)
+                    sent += 1
+                    client.spin_until(lambda: False, 0.6)
+                percents.append(100.0 * (_cpu_seconds(pid) - start_cpu) / (time.monotonic() - start))
+        finally:
+            pipeline.stop(timeout=30.0)
+        label = "collision_avoidance, 3 obstacles" if aware else "plain law, same goals"
+        rows.append(
+            {
+                "metric": f"cartesian_controller CPU at 1 kHz, panda, {label}",
+                "cpu_percent": float(np.median(percents)),
+                "cpu_percent_min": float(min(percents)),
+                "cpu_percent_max": float(max(percents)),
+                "load_average": os.getloadavg()[0],
+                "target": "≤ 30 % of a core" if aware else "",
+                "reference": "process utime + stime over 4 s windows",
+            }
+        )
+    return rows
+
+
 def run_collision_benchmarks() -> list[dict]:
     """Every row of the ``collision`` section."""
-    return [*benchmark_collision_step(), benchmark_pair_distance(), benchmark_solvers()]
+    return [
+        *benchmark_collision_step(),
+        benchmark_pair_distance(),
+        benchmark_solvers(),
+        *benchmark_controller_cpu(),
+    ]
 
 
 if __name__ == "__main__":

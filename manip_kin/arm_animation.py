@@ -119,13 +119,15 @@ VIEW_ELEVATION_DEG = 15.0
 VIEW_AZIMUTH_DEG = -15.0
 
 
-def _set_view(axis, points: np.ndarray) -> None:
+def set_arm_view(axis, points: np.ndarray) -> None:
+    """The view of every arm picture: from the side, slightly above, orthographic, equal axes."""
     axis.view_init(elev=VIEW_ELEVATION_DEG, azim=VIEW_AZIMUTH_DEG)
     axis.set_proj_type("ortho")  # no perspective: heights read true against the z axis
     equal_3d_axes(axis, points)
 
 
-def _draw_arm(axis, arm: ArmFrames, sample: int, colour, label: str | None = None):
+def draw_arm(axis, arm: ArmFrames, sample: int, colour, label: str | None = None):
+    """The arm of TF instant ``sample`` as lines between frame origins; returns (lines, joints)."""
     lines = []
     for k, (parent, child) in enumerate(arm.edges):
         segment = arm.positions[sample, [parent, child]]
@@ -147,12 +149,12 @@ def draw_arm_picture(arm: ArmFrames, out: str | Path, tool_frame: str = "tool", 
     samples = np.unique(np.linspace(0, len(arm.time) - 1, instants).astype(int))
     for k, sample in enumerate(samples):
         shade = 0.75 - 0.55 * k / max(1, len(samples) - 1)
-        _draw_arm(axis, arm, sample, (shade, shade, shade + 0.1), f"arm at t = {arm.time[sample]:.1f} s")
+        draw_arm(axis, arm, sample, (shade, shade, shade + 0.1), f"arm at t = {arm.time[sample]:.1f} s")
     if tool_frame in arm.frames:
         tool = arm.positions[:, arm.frames.index(tool_frame)]
         axis.plot(*tool.T, color="tab:purple", linewidth=1.5, label=f"{tool_frame} path")
     axis.scatter(0, 0, 0, color="black", marker="s", s=30, label=arm.frames[0])
-    _set_view(axis, arm.positions.reshape(-1, 3))
+    set_arm_view(axis, arm.positions.reshape(-1, 3))
     axis.set_title(title or "arm from the recording's /tf")
     axis.legend(loc="upper left", fontsize="small")
     figure.tight_layout()
@@ -192,8 +194,8 @@ def write_animation(
     samples = np.unique(np.linspace(0, len(arm.time) - 1, min(max_frames, len(arm.time))).astype(int))
     figure = plt.figure(figsize=(6, 6))
     axis = figure.add_subplot(projection="3d")
-    _set_view(axis, arm.positions.reshape(-1, 3))
-    lines, joints = _draw_arm(axis, arm, samples[0], "dimgray")
+    set_arm_view(axis, arm.positions.reshape(-1, 3))
+    lines, joints = draw_arm(axis, arm, samples[0], "dimgray")
     tool_index = arm.frames.index(tool_frame) if tool_frame in arm.frames else len(arm.frames) - 1
     (trail,) = axis.plot([], [], [], color="tab:purple", linewidth=1.5)
     heading = axis.set_title("")

@@ -77,12 +77,15 @@ class ControllerState(StrEnum):
     JOINT_LIMITED = "joint-limited"
     STALE_INPUT = "stale input"
     UNREACHABLE = "unreachable"
+    BLOCKED = "blocked"
     PAUSED = "paused"
     STOPPED = "stopped"
 
 
 #: States in which the commands come to rest and stay there (the law does not run).
-HALTED_STATES = (ControllerState.UNREACHABLE, ControllerState.PAUSED, ControllerState.STOPPED)
+HALTED_STATES = (ControllerState.UNREACHABLE, ControllerState.BLOCKED, ControllerState.PAUSED, ControllerState.STOPPED)
+#: Halted until a new goal comes.
+_UNTIL_NEW_GOAL = (ControllerState.UNREACHABLE, ControllerState.BLOCKED, ControllerState.STOPPED)
 
 #: Unreachable: over this long [s] of a resting goal, the task error fell by less than
 #: :data:`PROGRESS_FRACTION` of itself while the arm was singular or at joint limits.
@@ -253,7 +256,7 @@ class ControllerSupervisor:
         self._reference_moving = bool(moving) and self.goal_kind is GoalKind.JOINT
         self.progress.restart()
         self.unreachable_errors = None
-        if self.state in (ControllerState.UNREACHABLE, ControllerState.STOPPED):
+        if self.state in _UNTIL_NEW_GOAL:
             self._set(ControllerState.TRACKING, "new goal")
 
     def stop_requested(self) -> None:
@@ -289,7 +292,7 @@ class ControllerSupervisor:
         if self._paused:
             self._set(ControllerState.PAUSED, "paused on request; resume to go on")
             return False
-        if self.state in (ControllerState.UNREACHABLE, ControllerState.STOPPED):
+        if self.state in _UNTIL_NEW_GOAL:
             return False  # until a new goal
         if self._q_time_ns is None:
             self._set(ControllerState.STALE_INPUT, "no joint state yet")
@@ -364,6 +367,13 @@ class ControllerSupervisor:
         else:
             self._classify_limits(limited, "moving towards the goal")
 
+    def collision_blocked(self, blocked) -> None:
+        """A collision constraint holds the arm off its goal (a :class:`~manip_kin.qp.blocked.Blocked`,
+        or None: nothing happens): halted in ``blocked`` until a new goal, the detail naming the pair."""
+        if blocked is None:
+            return
+        self._set(ControllerState.BLOCKED, f"goal not reachable without collision: {blocked.reason}")
+
     def servo_step_done(self, limited_joints: Sequence[int], singular: bool, scale: float) -> None:
         """Classify a twist or jog step (a velocity command never converges): singular when
         the motion is slowed by more than half for a singularity, else tracking or joint-limited."""
@@ -401,7 +411,12 @@ class ControllerSupervisor:
     @property
     def level(self) -> str:
         """Diagnostic level of the state: ``ok`` or ``warn``."""
-        warn = (ControllerState.STALE_INPUT, ControllerState.SINGULAR, ControllerState.UNREACHABLE)
+        warn = (
+            ControllerState.STALE_INPUT,
+            ControllerState.SINGULAR,
+            ControllerState.UNREACHABLE,
+            ControllerState.BLOCKED,
+        )
         return "warn" if self.state in warn else "ok"
 
     def _set(self, state: ControllerState, detail: str) -> None:

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import coal
 import numpy as np
 from robot_data_files import PANDA, example_robot_data_urdf
 
@@ -83,3 +84,18 @@ def point_box_distance(point, centre, extents) -> float:
 def ball_obstacle_distance(model: RobotModel, q, centre, radius: float) -> float:
     """The nearest of the ball arm's spheres to a sphere obstacle, in closed form [m]."""
     return min(float(np.linalg.norm(c - np.asarray(centre))) - r - radius for _, c, r in ball_centres(model, q))
+
+
+def fresh_hand_link1_distance(model, q) -> float:
+    """The hand–link1 distance from the STL meshes with fresh coal objects (not the law's code path)."""
+    urdf = panda_files()[0]
+    meshes = urdf.parents[1] / "meshes" / "collision"
+    shapes = []
+    for name in ("link1", "hand"):
+        mesh = coal.MeshLoader().load(str(meshes / f"{name}.stl"), np.ones(3))
+        mesh.buildConvexHull(True, "Qt")
+        shapes.append(mesh.convex)
+    poses = [frame_pose(model, q, "panda_link1"), frame_pose(model, q, "ee")]  # ee = panda_hand
+    transforms = [coal.Transform3s(p[:3, :3], p[:3, 3]) for p in poses]
+    result = coal.DistanceResult()
+    return coal.distance(shapes[0], transforms[0], shapes[1], transforms[1], coal.DistanceRequest(), result)

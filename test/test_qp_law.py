@@ -3,7 +3,6 @@
 import math
 from dataclasses import replace
 
-import coal
 import numpy as np
 import pytest
 from collision_robots import (
@@ -11,6 +10,7 @@ from collision_robots import (
     PANDA_FOLDED,
     PANDA_READY,
     ball_obstacle_distance,
+    fresh_hand_link1_distance,
     panda_files,
 )
 from hypothesis import assume, given, settings
@@ -194,25 +194,10 @@ def test_goal_beside_an_obstacle_is_reached(ball_arm):
     assert damped > 0  # it passed within the influence distance
 
 
-def _fresh_hand_link1_distance(model, q) -> float:
-    """The hand–link1 distance from the STL meshes with fresh coal objects (not the law's code path)."""
-    urdf = panda_files()[0]
-    meshes = urdf.parents[1] / "meshes" / "collision"
-    shapes = []
-    for name in ("link1", "hand"):
-        mesh = coal.MeshLoader().load(str(meshes / f"{name}.stl"), np.ones(3))
-        mesh.buildConvexHull(True, "Qt")
-        shapes.append(mesh.convex)
-    poses = [frame_pose(model, q, "panda_link1"), frame_pose(model, q, "ee")]  # ee = panda_hand
-    transforms = [coal.Transform3s(p[:3, :3], p[:3, 3]) for p in poses]
-    result = coal.DistanceResult()
-    return coal.distance(shapes[0], transforms[0], shapes[1], transforms[1], coal.DistanceRequest(), result)
-
-
 def test_a_self_collision_goal_on_the_panda_stalls_without_contact_and_is_blocked(panda):
     model, collision = panda
     goal = frame_pose(model, PANDA_FOLDED, "ee")  # the hand inside link 1
-    assert _fresh_hand_link1_distance(model, PANDA_FOLDED) < -0.03
+    assert fresh_hand_link1_distance(model, PANDA_FOLDED) < -0.03
     config = QpConfig(controller=ControllerConfig(gain_linear=2.0, gain_angular=2.0))
     law = QpController(model, config, CollisionChecker(model, collision))
     history: list[QpOutput] = []
@@ -220,7 +205,7 @@ def test_a_self_collision_goal_on_the_panda_stalls_without_contact_and_is_blocke
     for step, (q, output) in enumerate(_run(law, PANDA_READY, goal, 2500)):
         history.append(output)
         if step % 25 == 0:
-            nearest = min(nearest, _fresh_hand_link1_distance(model, q))
+            nearest = min(nearest, fresh_hand_link1_distance(model, q))
     assert nearest >= 0.02 - 1e-3
     assert output.position_error_norm > 0.05  # stalled short of the goal
     assert np.abs(output.qdot).max() < 0.05
@@ -233,7 +218,7 @@ def test_a_self_collision_goal_on_the_panda_stalls_without_contact_and_is_blocke
     q = PANDA_READY.copy()
     for _ in range(2500):
         q = q + today.step(q, goal, dt=DT).qdot * DT
-    assert _fresh_hand_link1_distance(model, q) < -0.02
+    assert fresh_hand_link1_distance(model, q) < -0.02
 
 
 def test_infeasible_qp_falls_back_to_todays_law_counted_and_safe(ball_arm):

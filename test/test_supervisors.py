@@ -274,3 +274,21 @@ def test_generator_streams_finishes_and_is_preempted():
         pytest.approx(0.5),
         False,
     )
+
+
+def test_blocked_halts_until_a_new_goal_with_the_pair_in_the_detail():
+    from manip_kin.qp.blocked import Blocked
+
+    supervisor = _controller()
+    supervisor.joint_state_received(0)
+    supervisor.goal_received(0, GoalKind.POSE)
+    assert supervisor.gate(1 * MS)
+    supervisor.collision_blocked(None)  # nothing blocks: nothing changes
+    assert supervisor.state is not ControllerState.BLOCKED
+    supervisor.collision_blocked(Blocked("panda_link1-panda_hand", 0.0201, 1e-5, 0.0))
+    assert supervisor.state == "blocked" and supervisor.level == "warn" and not supervisor.active
+    assert "blocked by panda_link1-panda_hand (0.020 m apart)" in supervisor.detail
+    supervisor.joint_state_received(2 * MS)
+    assert not supervisor.gate(2 * MS) and supervisor.state == "blocked"  # halted: no step runs
+    supervisor.goal_received(3 * MS, GoalKind.POSE)
+    assert supervisor.state == "tracking" and supervisor.gate(3 * MS)

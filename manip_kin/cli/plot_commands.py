@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from manip_kin.collision_plot import FIGURE as COLLISION_FIGURE
 from manip_kin.plotting import FIGURES, load_run, plot_run
 
 
@@ -14,7 +15,8 @@ def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "plot",
         help="write PNG figures of a recorded run (tool vs reference, errors, velocities, joints, 3D path)",
-        description="Figures: " + ", ".join(FIGURES) + ". Times are seconds since the first message.",
+        description="Figures: " + ", ".join(FIGURES) + f"; {COLLISION_FIGURE} (the arm, the obstacles and the "
+        "nearest pair) when the controller ran with collision_avoidance. Times are seconds since the first message.",
     )
     parser.add_argument("file", metavar="FILE", help="a recording: .mcap file or rosbag2 bag directory")
     parser.add_argument(
@@ -66,6 +68,7 @@ def run_plot(args: argparse.Namespace) -> int:
     paths = plot_run(run, out_dir, title=args.title or source.stem)
     for path in paths:
         print(path)
+    paths += _collision_figure(source, run, out_dir, args)
     print(f"wrote {len(paths)} figures to {out_dir}", file=sys.stderr)
     if args.render:
         from manip_kin.plant.render import recorded_scene, render_run
@@ -89,3 +92,18 @@ def run_plot(args: argparse.Namespace) -> int:
         print(f"animating {min(args.frames, len(run.arm.time))} frames ...", file=sys.stderr, flush=True)
         print(write_animation(run.arm, target, max_frames=args.frames, title=args.title or source.stem))
     return 0
+
+
+def _collision_figure(source: Path, run, out_dir: Path, args) -> list[Path]:
+    """``collision.png`` when the recording holds the controller's nearest pair; else nothing."""
+    from manip_kin.collision_plot import arm_from_joint_states, load_nearest, plot_collision
+    from manip_kin.plant.render import recorded_scene
+
+    nearest = load_nearest(source, args.namespace)
+    if not len(nearest.time):
+        return []
+    scene = recorded_scene(source, args.namespace)
+    arm = run.arm or arm_from_joint_states(run)
+    path = plot_collision(arm, scene, nearest, out_dir / COLLISION_FIGURE, title=args.title or source.stem)
+    print(path)
+    return [path]

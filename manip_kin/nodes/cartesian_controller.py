@@ -32,6 +32,7 @@ from manip_kin.joint_control import JointTrackingOutput, joint_tracking_step
 from manip_kin.kinematics import frame_pose
 from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
+from manip_kin.nodes.collision_inputs import CollisionInputs
 from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import JointReferenceReader
 from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
@@ -44,6 +45,7 @@ from manip_kin.nodes.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.servo import SingularityScaling
 from manip_kin.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.supervisors import (
+    HALTED_STATES,
     SERVO_KINDS,
     ControllerState,
     ControllerSupervisor,
@@ -65,9 +67,10 @@ class CartesianControllerNode(LoopingNode):
         self._params = params
         self.rate_hz = params["rate_hz"]
         self.dt = 1.0 / self.rate_hz
+        self.base_frame = params["base_frame"] or self.model.base_frame
+        self.collision = CollisionInputs(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._configure(params)
         config = self.controller.config
-        self.base_frame = params["base_frame"] or self.model.base_frame
         self.supervisor = ControllerSupervisor(
             self._supervisor_config(params, self.controller), self.model.joint_names, self._diagnostics_period_ns
         )
@@ -167,6 +170,7 @@ class CartesianControllerNode(LoopingNode):
             respect_position_limits=params["respect_position_limits"],
         )
         controller = CartesianController(self.model, config)
+        law = self.collision.configure(self.model, params, controller, self.dt)  # the QP, or controller
         supervisor_config = self._supervisor_config(params, controller)
         diagnostics_period_ns = period_ns(params["diagnostics_rate_hz"])
         limits = joint_limits_from_params(self.model, params)
@@ -186,7 +190,7 @@ class CartesianControllerNode(LoopingNode):
         # law (not only the filter's braking) knows the joint is held and redistributes the task.
         full_stop = limits.stopping_time(np.where(np.isfinite(limits.velocity), limits.velocity, 0.0))
         self.limit_horizon = max(self.dt, full_stop)
-        self.controller = controller
+        self.controller, self.law = controller, law
         self.position_tolerance = params["position_tolerance"]
         self.orientation_tolerance = params["orientation_tolerance"]
         self._quaternion_tolerance = params["quaternion_tolerance"]
@@ -223,7 +227,7 @@ class CartesianControllerNode(LoopingNode):
     def _switch_model(self, model) -> str | None:
         """``~/reload_robot_description``: control ``model`` from the next cycle (the same joints,
         e.g. new limits or geometry), or why not (nothing changes)."""
-        problem = joints_problem(self.model, model)
+        problem = joints_problem(self.model, model) or self.collision.switch_problem()
         if problem:
             return problem
         previous = self.model
@@ -330,6 +334,8 @@ class CartesianControllerNode(LoopingNode):
         self._goal_arrival_ns = now_ns
         # A goal after a quiet spell (not a line's stream): say at once that it was taken.
         self._report_now = self._report_now or quiet_before
+        if quiet_before:
+            self.collision.restart()
 
     def _rejected(self, reason: str, msg) -> None:
         """Keep a rejected goal's reason and stamp for the status (a CLI waits on them)."""
@@ -386,6 +392,7 @@ class CartesianControllerNode(LoopingNode):
         if self._halting:  # halt() owns the command stream now
             return
         self._take_inputs(now_ns)
+        self.collision.take()
         self._take_requests()
         supervisor = self.supervisor
         target = self._zeros
@@ -397,7 +404,7 @@ class CartesianControllerNode(LoopingNode):
                 if kind is GoalKind.JOINT:
                     target = self._joint_step(now_ns, q)
                 elif kind is GoalKind.TWIST:
-                    self.output, target = self.servo.twist_step(self.controller, q, now_ns, self.dt, self.limit_horizon)
+                    self.output, target = self.servo.twist_step(self.law, q, now_ns, self.dt, self.limit_horizon)
                     limited = set(self.output.limited_joints) | set(self.command_filter.braking_joints)
                     supervisor.servo_step_done(sorted(limited), self.output.singular, self.servo.scale)
                 elif kind is GoalKind.JOG:
@@ -409,12 +416,11 @@ class CartesianControllerNode(LoopingNode):
                     supervisor.servo_step_done(self.joint_output.limited_joints, False, 1.0)
                 else:
                     twist_fresh = supervisor.feed_forward_fresh(now_ns)
-                    output = self.controller.step(
-                        q, self.goal, self._twist if twist_fresh else None, self.limit_horizon
-                    )
+                    output = self.law.step(q, self.goal, self._twist if twist_fresh else None, self.limit_horizon)
                     self.output = output
                     target = output.qdot
                     supervisor.pose_step_done(output, twist_fresh, now_ns, self.command_filter.braking_joints)
+                    supervisor.collision_blocked(self.collision.pose_step_done(output, now_ns))
             except ManipKinError as error:
                 target = self._zeros
                 supervisor.step_failed(error)
@@ -439,7 +445,7 @@ class CartesianControllerNode(LoopingNode):
         state, kind = supervisor.state, supervisor.goal_kind
         previous, self._logged_state = self._logged_state, state
         previous_kind, self._logged_kind = self._logged_kind, kind
-        halted = (ControllerState.UNREACHABLE, ControllerState.PAUSED, ControllerState.STOPPED)
+        halted = HALTED_STATES
         if kind != previous_kind:
             self._state_log(
                 f"kind:{kind}", f"command {previous_kind or 'none'} -> {kind or 'none'}: {supervisor.detail}"
@@ -513,7 +519,9 @@ class CartesianControllerNode(LoopingNode):
         if supervisor.goal_kind is GoalKind.JOINT:
             values = self._joint_values(supervisor.active and self.joint_output is not None)
         else:
-            values = self._pose_values(supervisor.active and self.output is not None)
+            # Blocked: the errors where the arm was held off, for the outcome's words.
+            held_off = supervisor.state is ControllerState.BLOCKED
+            values = self._pose_values((supervisor.active or held_off) and self.output is not None)
         values += [
             ("goal_kind", supervisor.goal_kind or ""),
             ("task", self.controller.task.name),
@@ -535,6 +543,7 @@ class CartesianControllerNode(LoopingNode):
             ("braking_joints", ",".join(self.model.joint_names[i] for i in self.command_filter.braking_joints)),
             ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),
             ("loop_error", self.loop_error()),
+            *self.collision.report(self.get_clock().now().to_msg(), self.output),
         ] + stats_key_values(self.loop.stats())
         level = self.diagnostic_level(self.supervisor.level)
         status = conv.make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+from manip_kin.nodes.collision_params import COLLISION_PARAMETERS
 from manip_kin.nodes.joint_limit_params import HELP_LINE
 from manip_kin.nodes.params import (
     REALTIME_PRIORITY,
@@ -228,6 +229,7 @@ PARAMETERS = (
         maximum=10.0,
         tunable=True,
     ),
+    *COLLISION_PARAMETERS,
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -248,6 +250,8 @@ USAGE = usage_text(
     "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
     "one of several); a later, different one is logged, and the service\n"
     "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.\n"
+    "With collision_avoidance (a URDF robot) pose goals and twist commands run a QP law that keeps\n"
+    "every checked pair collision_safety_distance apart; a goal it holds off ends 'blocked'.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
     extra_help=HELP_LINE,
@@ -266,14 +270,20 @@ USAGE = usage_text(
         ),
         ("joint_jog", "sensor_msgs/JointState", "names + velocities of any joints to jog"),
         ("joint_states", "sensor_msgs/JointState", "matched to the model by joint name"),
+        (
+            "collision_objects",
+            "visualization_msgs/MarkerArray",
+            "obstacles in the base frame (CUBE, SPHERE, CYLINDER, MESH_RESOURCE; collision_avoidance)",
+        ),
     ],
     publishes=[
         ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
         (
             "/diagnostics",
             "diagnostic_msgs/DiagnosticArray",
-            "state, errors [m, rad], manipulability, damping, limits, loop timing",
+            "state, errors [m, rad], manipulability, damping, limits, nearest pair, loop timing",
         ),
+        ("markers", "visualization_msgs/MarkerArray", "the nearest pair's witness points (collision_avoidance)"),
     ],
     example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000 -p gain_linear:=1.5",
 )

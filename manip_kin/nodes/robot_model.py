@@ -96,6 +96,7 @@ def load_node_model(node: Node, params: dict, switch: Callable[[RobotModel], str
         description = watch.wait()
         load = _description_loader(params, watch.topic)
         model = load(description.text)
+        node.robot_description_text = description.text  # for what else the URDF holds (collision geometry)
         origin = f"the URDF on {watch.topic} from {description.publisher}"
         if switch is None:
             watch.close()

@@ -43,6 +43,7 @@ from manip_kin.nodes import conversions as conv
 from manip_kin.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.nodes.joint_messages import trajectory_points
 from manip_kin.nodes.params import LiveParameters, declare_parameters, period_ns
+from manip_kin.nodes.path_check import PathCheck, joint_path
 from manip_kin.nodes.rate_loop import LoopingNode, PolledSubscription, ThrottledLog, stats_key_values
 from manip_kin.nodes.robot_description import joints_problem
 from manip_kin.nodes.robot_model import load_node_model
@@ -68,6 +69,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.supervisor = GeneratorSupervisor(period_ns(params["diagnostics_rate_hz"]))
         self._params = params
         self.bounds = InputBounds.of(self.model)
+        self.path_check = PathCheck(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._configure(params)
         LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
 
@@ -156,6 +158,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
         self._quaternion_tolerance = params["quaternion_tolerance"]
         self._path_points = max(2, params["path_points"])
+        self.path_check.safety_distance = params["collision_safety_distance"]
         self.supervisor.throttle.period_ns = period_ns(params["diagnostics_rate_hz"])
 
     def _set_parameters(self, updates: dict) -> str | None:
@@ -171,7 +174,11 @@ class TrajectoryGeneratorNode(LoopingNode):
     def _switch_model(self, model) -> str | None:
         """``~/reload_robot_description``: plan the next motion with ``model`` (the same joints),
         or why not (nothing changes); a running motion keeps its plan."""
-        problem = joints_problem(self.model, model)
+        problem = joints_problem(self.model, model) or (
+            "collision_check: the collision geometry was built at start; restart the node for a new URDF"
+            if self.path_check.enabled
+            else None
+        )
         if problem:
             return problem
         bounds = InputBounds.of(model)
@@ -247,8 +254,12 @@ class TrajectoryGeneratorNode(LoopingNode):
         try:
             names, points = trajectory_points(msg)
             plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling, self.joint_limits)
+            collision = self.path_check.problem(*joint_path(plan), "joint trajectory")
         except ManipKinError as error:
             self._reject(msg, str(error))
+            return None
+        if collision:
+            self._reject(msg, collision, "unreachable")
             return None
         detail = f"joint trajectory of {plan.point_count} point(s) in {plan.duration:.3f} s"
         times = np.linspace(0.0, plan.duration, self._path_points)
@@ -284,6 +295,10 @@ class TrajectoryGeneratorNode(LoopingNode):
                 report = check_line_reachable(self.model, line, q, task=self.task)
                 if not report.reachable:
                     self._reject(target_msg, report.reason, "unreachable")
+                    return False
+                collision = self.path_check.problem(report.path, report.progress, "line")
+                if collision:
+                    self._reject(target_msg, collision, "unreachable")
                     return False
                 too_fast = line_limits_problem(self.model, line, report, self.joint_limits)
                 if too_fast:
@@ -335,6 +350,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         return response
 
     def _cycle(self, now_ns: int) -> None:
+        self.path_check.take()
         target = self._take_inputs(now_ns)
         supervisor = self.supervisor
         if self._stop_requested:

@@ -6,6 +6,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 from __future__ import annotations
 
 from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS
+from manip_kin.nodes.collision_params import PATH_CHECK_PARAMETERS
 from manip_kin.nodes.joint_limit_params import HELP_LINE
 from manip_kin.nodes.params import (
     REALTIME_PRIORITY,
@@ -117,6 +118,7 @@ PARAMETERS = (
     # the path is sampled in the loop when a motion starts.
     ParamSpec("path_points", "int", 50, "poses in planned_path", minimum=2, maximum=10000, tunable=True),
     diagnostics_rate(5.0, "rate of /diagnostics (also sent at once on a state change)"),
+    *PATH_CHECK_PARAMETERS,
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
 )
@@ -133,7 +135,8 @@ USAGE = usage_text(
     "current joint_states and streamed as joint_reference, within joint_limits.<joint>.*\n"
     "(velocity, acceleration, jerk); a single point at time_from_start 0 is timed as fast as\n"
     "those limits allow. The latest goal of either kind pre-empts the running motion.\n"
-    "Unreachable or malformed goals are rejected with a log line.\n"
+    "Unreachable or malformed goals are rejected with a log line; with collision_check (a URDF\n"
+    "robot) so is a motion through the arm itself or collision_objects, saying where and which pair.\n"
     "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
     "one of several); a later, different one is logged, and the service\n"
     "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.",
@@ -144,6 +147,7 @@ USAGE = usage_text(
         ("line_target", "geometry_msgs/PoseStamped", "end pose of the line, frame_id = base frame"),
         ("joint_trajectory", "trajectory_msgs/JointTrajectory", "joint names, points with time_from_start"),
         ("joint_states", "sensor_msgs/JointState", "current configuration: start of a line or trajectory, reach check"),
+        ("collision_objects", "visualization_msgs/MarkerArray", "obstacles in the base frame (collision_check)"),
     ],
     publishes=[
         ("goal_pose", "geometry_msgs/PoseStamped", "the line's pose at each cycle"),
