@@ -6,7 +6,9 @@ Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion`
 (the collision-aware QP step, coal's per-pair cost, daqp against proxsuite), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
 deviation), ``recorder`` (MCAP write cost, live recording throughput), ``liveview`` (the
 Foxglove live view's CPU with and without clients), ``physics`` (MuJoCo
-plant steps per second, robot_state's CPU and the tracking on both plants).
+plant steps per second, robot_state's CPU and the tracking on both plants), ``limits`` (the
+acceleration and jerk limits: the command filter's cost per cycle, the controller's CPU, goal
+latency, convergence and line deviation with and without them).
 
 Timings here are wall-clock on a shared 2-core machine: medians over many calls,
 p90 to show the spread. Targets come from the issues; a figure is a measurement, not
@@ -29,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics")
+SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics", "limits")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -204,6 +206,12 @@ def bench_physics() -> list[dict]:
     return run_physics_benchmarks()
 
 
+def bench_limits(repeats: int) -> list[dict]:
+    from bench_limits import filter_rows, node_rows, offline_line_row
+
+    return filter_rows(repeats) + [offline_line_row()] + node_rows()
+
+
 def _format_value(row: dict) -> str:
     parts = []
     for key, value in row.items():
@@ -252,6 +260,7 @@ def main() -> int:
         "recorder": bench_recorder,
         "liveview": bench_live_view,
         "physics": bench_physics,
+        "limits": lambda: bench_limits(args.repeats),
     }
     for section in chosen:
         print(f"[bench] {section} ...", file=sys.stderr, flush=True)
