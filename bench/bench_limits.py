@@ -36,6 +36,9 @@ import numpy as np
 GENOVA7_Q0 = [math.pi / 2, -math.pi / 4, 0.0, -math.pi / 4, 0.0, 0.15, math.pi / 4]
 GENOVA7_GOAL = ([0.2, -0.7, 0.3], (0.0, 1.57, 0.0))
 
+#: The labels of the two configurations.
+WITH, WITHOUT = "with limits", "without limits"
+
 
 def without_limits_parameters(model) -> dict:
     """Controller parameters that switch the command filter off (test/node_harness.py's
@@ -74,13 +77,11 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
 
     from manip_kin.command_filter import CommandFilter, FilterResult
     from manip_kin.control import CartesianController, ControllerConfig
-    from manip_kin.joint_limits import JointLimits
     from manip_kin.kinematics import pose_in_base
 
     rng = np.random.default_rng(seed)
-    limits = JointLimits.of(model)
-    off = {"has_acceleration_limits": False, "has_jerk_limits": False}
-    limits_off = JointLimits.of(model, {n: replace(lim, **off) for n, lim in zip(model.joint_names, limits.per_joint)})
+    both = limits_on_and_off(model)
+    limits, limits_off = both[WITH], both[WITHOUT]
     controller = CartesianController(model, ControllerConfig())
     filters = {
         name: CommandFilter(chosen, model.lower, model.upper, dt)
@@ -173,21 +174,60 @@ def filter_rows(n: int = 20_000) -> list[dict]:
     return rows
 
 
-def offline_line_row(dt: float = 0.001) -> dict:
-    """The irb120 line of bench_nodes (0.4 m/s, IRB120_LINE_GENERATOR's trapezoid, gains 6/s,
-    feed-forward twist) without ROS: the law, the command filter and a perfect integrator at
-    ``dt``, with and without the limits. No timing in it: what the filter alone does to the line."""
+def limits_on_and_off(model) -> dict:
+    """The default limits of ``model`` and the same with every acceleration and jerk limit off."""
+    from manip_kin.joint_limits import JointLimits
+
+    defaults = JointLimits.of(model)
+    off = {"has_acceleration_limits": False, "has_jerk_limits": False}
+    per_joint = {name: replace(limit, **off) for name, limit in zip(model.joint_names, defaults.per_joint)}
+    return {WITH: defaults, WITHOUT: JointLimits.of(model, per_joint)}
+
+
+def closed_loop(model, limits, reference, q0, steps: int, gain: float, dt: float = 0.001, until=None) -> dict:
+    """The law, the command filter and a perfect integrator at ``dt``, as the controller node
+    runs them (its position-limit horizon: a stop from full speed), without ROS or timing.
+
+    Args:
+        reference: ``t [s] -> (goal pose (4, 4), feed-forward twist or None)``.
+        until: ``ControlOutput -> bool``: stop at the first step where it is true.
+
+    Returns:
+        ``points`` (controlled frame positions after each step, shape (k, 3)), ``steps``
+        (steps run) and ``lag`` (the largest ``|law's rate - command|`` of any joint [rad/s | m/s]).
+    """
     from manip_kin.command_filter import CommandFilter
     from manip_kin.control import CartesianController, ControllerConfig
+    from manip_kin.kinematics import pose_in_base
+
+    controller = CartesianController(model, ControllerConfig(gain_angular=gain, gain_linear=gain))
+    command_filter = CommandFilter(limits, model.lower, model.upper, dt)
+    velocity = np.where(np.isfinite(limits.velocity), limits.velocity, 0.0)
+    horizon = max(dt, limits.stopping_time(velocity))
+    q, points, lag = np.array(q0, dtype=float), [], 0.0
+    for k in range(steps):
+        pose, twist = reference(k * dt)
+        output = controller.step(q, pose, twist, horizon)
+        if until is not None and until(output):
+            break
+        command = np.asarray(command_filter.update(output.qdot, q))
+        lag = max(lag, float(np.max(np.abs(output.qdot - command))))
+        q = q + dt * command
+        points.append(pose_in_base(model, q, controller.frame_index)[:3, 3])
+    return {"points": np.array(points), "steps": k, "lag": lag}
+
+
+def offline_rows(dt: float = 0.001) -> list[dict]:
+    """Without ROS (:func:`closed_loop`), with and without the limits: the irb120 line of
+    bench_nodes (0.4 m/s, IRB120_LINE_GENERATOR's trapezoid, gains 6/s, feed-forward twist) and
+    genova7's pose goal scenario. No timing in them: what the filter alone changes."""
     from manip_kin.ik import solve_ik
-    from manip_kin.joint_limits import JointLimits
-    from manip_kin.kinematics import frame_pose
     from manip_kin.pipeline import IRB120_LINE_GENERATOR
     from manip_kin.robots import load_robot
     from manip_kin.rotations import make_transform, rpy_to_matrix
     from manip_kin.trajectory import LineTrajectory, MotionLimits, distance_to_segment
 
-    model = load_robot("irb120")
+    irb120 = load_robot("irb120")
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
     start, end = make_transform(down, [0.4, 0.1, 0.6]), make_transform(down, [-0.4, 0.3, 0.5])
     motion = MotionLimits(
@@ -196,42 +236,50 @@ def offline_line_row(dt: float = 0.001) -> dict:
         IRB120_LINE_GENERATOR["max_angular_velocity"],
     )
     line = LineTrajectory.plan(start, end, IRB120_LINE_GENERATOR["time_scaling"], motion)
-    controller = CartesianController(model, ControllerConfig(gain_linear=6.0, gain_angular=6.0))
-    q_start = solve_ik(model, start, np.zeros(model.dof)).q
-    row: dict = {"metric": "irb120 line 0.4 m/s, offline closed loop at 1 kHz (no ROS): max deviation"}
-    off = {"has_acceleration_limits": False, "has_jerk_limits": False}
-    defaults = JointLimits.of(model)
-    for tag, limits in (
-        ("with", defaults),
-        (
-            "without",
-            JointLimits.of(model, {n: replace(lim, **off) for n, lim in zip(model.joint_names, defaults.per_joint)}),
-        ),
-    ):
-        command_filter = CommandFilter(limits, model.lower, model.upper, dt)
-        velocity = np.where(np.isfinite(limits.velocity), limits.velocity, 0.0)
-        horizon = max(dt, limits.stopping_time(velocity))
-        q, points, lag = q_start.copy(), [], 0.0
-        for k in range(int((line.duration + 0.5) / dt)):
-            t = k * dt
-            pose, twist = line.sample(min(t, line.duration))
-            output = controller.step(q, pose, twist if t < line.duration else None, horizon)
-            command = np.asarray(command_filter.update(output.qdot, q))
-            lag = max(lag, float(np.max(np.abs(output.qdot - command))))
-            q = q + dt * command
-            points.append(frame_pose(model, q)[:3, 3])
-        deviation = distance_to_segment(np.array(points), start[:3, 3], end[:3, 3])
-        row[f"{tag}_limits_max_deviation_mm"] = float(deviation.max() * 1e3)
-        row[f"{tag}_limits_max_command_lag_rad_s"] = lag
-    row["target"] = "≤ 0.2 mm (issue 24)"
-    row["reference"] = "deterministic: one run; lag = max |law's rate - command| of any joint"
-    return row
+
+    def along_line(t: float):
+        pose, twist = line.sample(min(t, line.duration))
+        return pose, twist if t < line.duration else None
+
+    q_start = solve_ik(irb120, start, np.zeros(irb120.dof)).q
+    steps = int((line.duration + 0.5) / dt)
+    line_row: dict = {"metric": "irb120 line 0.4 m/s, offline closed loop at 1 kHz (no ROS)"}
+    for tag, limits in limits_on_and_off(irb120).items():
+        run = closed_loop(irb120, limits, along_line, q_start, steps, 6.0, dt)
+        deviation = distance_to_segment(run["points"], start[:3, 3], end[:3, 3])
+        key = tag.replace(" ", "_")
+        line_row[f"{key}_max_deviation_mm"] = float(deviation.max() * 1e3)
+        line_row[f"{key}_max_command_lag"] = run["lag"]
+    line_row["target"] = "≤ 0.2 mm (issue 24)"
+    line_row["reference"] = "deterministic; lag: max |law's rate - command| of any joint [rad/s]"
+
+    genova7 = load_robot("genova7")
+    goal = make_transform(rpy_to_matrix(*GENOVA7_GOAL[1]), GENOVA7_GOAL[0])
+
+    def converged(output) -> bool:  # the controller's default tolerances
+        return np.linalg.norm(output.position_error) <= 1e-4 and np.linalg.norm(output.orientation_error) <= 1e-3
+
+    converge_row: dict = {"metric": "genova7 pose goal, offline closed loop at 1 kHz (no ROS): time to converge"}
+    for tag, limits in limits_on_and_off(genova7).items():
+        run = closed_loop(genova7, limits, lambda t: (goal, None), GENOVA7_Q0, int(40 / dt), 0.8, dt, converged)
+        converge_row[f"{tag.replace(' ', '_')}_s"] = run["steps"] * dt
+    converge_row["exponential_s"] = _exponential_time(genova7, goal)
+    converge_row["target"] = "close to the exponential time"
+    converge_row["reference"] = "deterministic; gains 0.8/0.8 1/s, tolerances 1e-4 m, 1e-3 rad"
+    return [line_row, converge_row]
+
+
+def _exponential_time(model, goal) -> float:
+    """Pure exponential convergence from GENOVA7_Q0 at 0.8 1/s to the tolerances 1e-4 m, 1e-3 rad [s]."""
+    from manip_kin.control import pose_error
+    from manip_kin.kinematics import frame_pose
+
+    orientation, position = pose_error(frame_pose(model, GENOVA7_Q0), goal)
+    return max(math.log(np.linalg.norm(position) / 1e-4), math.log(np.linalg.norm(orientation) / 1e-3)) / 0.8
 
 
 def _converge_row(controller: dict, tag: str) -> dict:
     """genova7's pose goal scenario at 1 kHz: the time until the controller reports converged."""
-    from manip_kin.control import pose_error
-    from manip_kin.kinematics import frame_pose
     from manip_kin.pipeline import Pipeline, pipeline_processes
     from manip_kin.robots import load_robot
     from manip_kin.rotations import make_transform, rpy_to_matrix
@@ -244,9 +292,6 @@ def _converge_row(controller: dict, tag: str) -> dict:
         initial_positions=GENOVA7_Q0,
         controller={"gain_linear": 0.8, "gain_angular": 0.8, **controller},
     )
-    # Pure exponential convergence from q0 at 0.8 1/s to the default tolerances (1e-4 m, 1e-3 rad).
-    orientation, position = pose_error(frame_pose(model, GENOVA7_Q0), goal)
-    exponential = max(math.log(np.linalg.norm(position) / 1e-4), math.log(np.linalg.norm(orientation) / 1e-3)) / 0.8
     with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_limits_")) as pipeline:
         client = pipeline.client()
         client.spin_for(1.0)
@@ -257,15 +302,11 @@ def _converge_row(controller: dict, tag: str) -> dict:
             "metric": f"genova7 pose goal at 1 kHz, time to converge, {tag}",
             "converged": converged,
             "time_to_converge_s": client.time_to_converge(stamp, started),
-            "exponential_s": exponential,
+            "exponential_s": _exponential_time(model, goal),
             "position_error_m": status.number("position_error") if status is not None else math.nan,
             "target": "converged, close to the exponential time",
             "reference": "gains 0.8/0.8 1/s; exponential: ln(e0/tolerance)/0.8",
         }
-
-
-#: The labels of the two configurations.
-WITH, WITHOUT = "with limits", "without limits"
 
 
 def node_rows(rounds: int = 2) -> list[dict]:
@@ -349,14 +390,12 @@ def _ratio_rows(by_round: list[dict[str, dict[str, dict]]]) -> list[dict]:
 
 
 def run_limits_benchmarks(rounds: int = 2) -> list[dict]:
-    return filter_rows() + [offline_line_row()] + node_rows(rounds)
+    return filter_rows() + offline_rows() + node_rows(rounds)
 
 
 if __name__ == "__main__":
     sys.path.insert(1, str(__import__("pathlib").Path(__file__).resolve().parent.parent / "test"))
     part = sys.argv[1] if len(sys.argv) > 1 else ""
-    chosen = {"filter": lambda: filter_rows() + [offline_line_row()], "nodes": node_rows}.get(
-        part, run_limits_benchmarks
-    )
+    chosen = {"filter": lambda: filter_rows() + offline_rows(), "nodes": node_rows}.get(part, run_limits_benchmarks)
     json.dump(chosen(), sys.stdout, indent=1)
     sys.stdout.write("\n")

@@ -207,9 +207,9 @@ def bench_physics() -> list[dict]:
 
 
 def bench_limits(repeats: int) -> list[dict]:
-    from bench_limits import filter_rows, node_rows, offline_line_row
+    from bench_limits import filter_rows, node_rows, offline_rows
 
-    return filter_rows(repeats) + [offline_line_row()] + node_rows()
+    return filter_rows(repeats) + offline_rows() + node_rows()
 
 
 def _format_value(row: dict) -> str:
