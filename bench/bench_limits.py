@@ -71,7 +71,8 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
         two figures for the variants (``no_braking_check_*``, ``limits_off_*``, ``jump_*``),
         ``limited_fraction`` (cycles whose command differs from the law's: ruckig shaping it),
         ``braking_fraction`` (cycles with a joint braking before a position limit),
-        ``unsynchronised_cycles`` and ``n``.
+        ``step_general_path_fraction`` (steps that needed damping, position or velocity
+        limits: the step's slow path, as in bench_motion), ``unsynchronised_cycles`` and ``n``.
     """
     from bench_motion import _timer_overhead_ns
 
@@ -103,7 +104,7 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
     jumps = [(rng.uniform(-1.0, 1.0, model.dof) * velocity).tolist() for _ in range(1000)]
     lower, upper = model.lower, model.upper
     times = {name: np.empty(total) for name in ("step", *filters)}
-    limited = braking = 0
+    limited = braking = general = 0
     q = model.random_configuration(rng, margin=0.05)
     clock = time.perf_counter_ns
     step = controller.step
@@ -133,6 +134,7 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
         if i >= warm_up:
             limited += filters["node"].result is FilterResult.LIMITED
             braking += bool(filters["node"].braking_joints)
+            general += output.damping > 0.0 or bool(output.limited_joints) or output.velocity_scale < 1.0
         q = np.clip(q + dt * np.asarray(command), lower, upper)
     overhead = _timer_overhead_ns()
     figures = {name: _percentiles(values[warm_up:], overhead) for name, values in times.items()}
@@ -150,6 +152,7 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
     row.update(
         limited_fraction=limited / n,
         braking_fraction=braking / n,
+        step_general_path_fraction=general / n,
         unsynchronised_cycles=filters["node"].unsynchronised_cycles,
         n=n,
     )
