@@ -9,7 +9,9 @@
 * goal-to-first-reacting-command latency: goals alternate 1 cm above and below the
   current tool pose; the latency is from just before ``publish`` of a goal to the arrival
   (in this process, polled without an executor) of the first ``/joint_velocity_commands``
-  whose tool z velocity has the new sign;
+  whose tool z velocity has the new sign. With the acceleration and jerk limits (on by
+  default since issue 24) that includes reversing the command within them; goals 10 µm
+  apart, a change the limits let through in one period, measure the reaction alone;
 * the floor under that latency: a round trip to another Python process and back with the
   nodes' transport and wait set and no work in between, on the idle machine and beside the
   1 kHz pipeline;
@@ -57,21 +59,38 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def _loop_rows(rate_hz: float, priority: int, window: float = 4.0, kernel_default_slice: bool = False) -> list[dict]:
+def _loop_rows(
+    rate_hz: float,
+    priority: int,
+    window: float = 4.0,
+    kernel_default_slice: bool = False,
+    controller: dict | None = None,
+    tag: str = "",
+    floor: bool = True,
+    latency_steps: tuple[tuple[float, int], ...] = ((0.01, 500), (1e-5, 500)),
+) -> list[dict]:
     """Loop, CPU and (at 1 kHz) latency rows of one pipeline. ``kernel_default_slice``: the nodes
-    run with ``scheduler_slice`` 0 (what a loop thread gets without asking), loop rows only."""
+    run with ``scheduler_slice`` 0 (what a loop thread gets without asking), loop rows only.
+    ``controller``: extra controller parameters, named by ``tag`` in the labels; ``floor``:
+    with the round-trip row beside the pipeline (at 1 kHz); ``latency_steps``: one latency row
+    per ``(goal step [m], trials)``."""
     from manip_kin.pipeline import Pipeline, pipeline_processes
     from manip_kin.rotations import make_transform, rpy_to_matrix
 
     goal = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
-    label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
+    label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "") + (f", {tag}" if tag else "")
     extra = {}
     if kernel_default_slice:
         label += ", the kernel's default slice"
         extra = {"scheduler_slice": 0.0}
     rows = []
     processes = pipeline_processes(
-        "genova7", rate_hz=rate_hz, realtime_priority=priority, controller=extra, generator=extra, robot_state=extra
+        "genova7",
+        rate_hz=rate_hz,
+        realtime_priority=priority,
+        controller={**extra, **(controller or {})},
+        generator=extra,
+        robot_state=extra,
     )
     with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_nodes_")) as pipeline:
         client = pipeline.client()
@@ -100,13 +119,18 @@ def _loop_rows(rate_hz: float, priority: int, window: float = 4.0, kernel_defaul
             row["reference"] = REFERENCE
             rows.append(row)
         if rate_hz >= 1000 and not kernel_default_slice:
-            # The floor under the latency, measured while the same nodes load the machine.
-            rows.append(_round_trip_row(label=f"beside the pipeline at {label}"))
-            rows.append(_latency_row(pipeline, label, priority))
+            if floor:  # the floor under the latency, measured while the same nodes load the machine
+                rows.append(_round_trip_row(label=f"beside the pipeline at {label}"))
+            rows += [_latency_row(pipeline, label, priority, trials, step) for step, trials in latency_steps]
     return rows
 
 
-def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict:
+def _latency_row(pipeline, label: str, priority: int, trials: int = 500, step_m: float = 0.01) -> dict:
+    """Goals ``step_m`` above and below the tool pose in turn, 10 ms apart; the latency of each
+    is until the first command whose tool z velocity has the new sign (beyond ``step_m`` x 0.01
+    1/s, 1e-4 m/s at the 1 cm step). With acceleration and jerk limits a 1 cm step reverses
+    the command within them (milliseconds); a step the limits let through in one period
+    (10 µm on genova7) measures the reaction alone."""
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.kinematics import pose_and_jacobian_in_base
@@ -115,6 +139,9 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict
 
     model = load_robot("genova7")
     client = pipeline.client()
+    # Hold still first: the first trials then do not start from the scenario's motion.
+    client.send_goal(pose_and_jacobian_in_base(model, client.current_positions(), model.frame_index("tool"))[0])
+    client.spin_for(0.5)
     q = client.current_positions()
     client.unwatch_state()  # the measurement reads only the commands
     pose, jac = pose_and_jacobian_in_base(model, q, model.frame_index("tool"))
@@ -152,11 +179,12 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict
     ):
         raise RuntimeError("joint_velocity_commands: not a Float64MultiArray with an empty layout")
     latencies, published, received = [], [], []
+    threshold = step_m * 0.01
     try:
         for trial in range(trials):
             sign = 1.0 if trial % 2 == 0 else -1.0
             goal = pose.copy()
-            goal[2, 3] += sign * 0.01
+            goal[2, 3] += sign * step_m
             msg = client.pose_msg(goal)
             while commands.take() is not None:
                 pass
@@ -172,7 +200,7 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict
                 arrived = time.monotonic_ns()
                 data, info = taken
                 velocities = tail.unpack_from(data, len(data) - tail.size)
-                if sum(row * velocity for row, velocity in zip(z_row, velocities)) * sign > 1e-4:
+                if sum(row * velocity for row, velocity in zip(z_row, velocities)) * sign > threshold:
                     latencies.append((arrived - sent) * 1e-6)
                     published.append((info.get("source_timestamp", 0) - sent_wall) * 1e-6)
                     received.append((info.get("received_timestamp", 0) - sent_wall) * 1e-6)
@@ -188,7 +216,8 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500) -> dict
     published_values = _samples(published)
     received_values = _samples(received)
     return {
-        "metric": f"goal-to-first-reacting-command latency, {label}",
+        "metric": f"goal-to-first-reacting-command latency, {label}"
+        + (f", goals ±{step_m * 1e3:g} mm" if step_m != 0.01 else ""),
         "p50_ms": float(np.percentile(values, 50)),
         "p99_ms": float(np.percentile(values, 99)),
         "max_ms": float(values.max()),
@@ -339,7 +368,15 @@ def _wake_up_rows() -> list[dict]:
     return rows
 
 
-def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None, generator: dict | None = None) -> dict:
+def _line_row(
+    rate_hz: float,
+    priority: int,
+    robot_state: dict | None = None,
+    generator: dict | None = None,
+    controller: dict | None = None,
+    tag: str = "",
+) -> dict:
+    """The irb120 line; ``controller``: extra controller parameters, named by ``tag`` in the label."""
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -355,12 +392,12 @@ def _line_row(rate_hz: float, priority: int, robot_state: dict | None = None, ge
         "irb120",
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
-        controller={"gain_linear": 6.0, "gain_angular": 6.0},
+        controller={"gain_linear": 6.0, "gain_angular": 6.0, **(controller or {})},
         generator={**IRB120_LINE_GENERATOR, **(generator or {})},
         realtime_priority=priority,
         robot_state=robot_state,
     )
-    label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "")
+    label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "") + (f", {tag}" if tag else "")
     with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_line_")) as pipeline:
         client = pipeline.client()
         converged, _ = client.wait_converged(client.send_goal(make_transform(down, start)), 30)

@@ -6,8 +6,10 @@ Sections (``--only`` picks some): ``core`` (FK, Jacobian, batched FK), ``motion`
 (the collision-aware QP step, coal's per-pair cost, daqp against proxsuite), ``nodes`` (live ROS pipeline loop rates, latency, CPU, line
 deviation), ``recorder`` (MCAP write cost, live recording throughput), ``liveview`` (the
 Foxglove live view's CPU with and without clients), ``physics`` (MuJoCo
-plant steps per second, robot_state's CPU and the tracking on both plants), ``servo`` (twist to
-the first moving command at 1 kHz).
+plant steps per second, robot_state's CPU and the tracking on both plants), ``limits`` (the
+acceleration and jerk limits: the command filter's cost per cycle, the controller's CPU, goal
+latency, convergence and line deviation with and without them), ``servo`` (twist to the
+first moving command at 1 kHz).
 
 Timings here are wall-clock on a shared 2-core machine: medians over many calls,
 p90 to show the spread. Targets come from the issues; a figure is a measurement, not
@@ -30,7 +32,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
 
-SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics", "servo")
+SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics", "limits", "servo")
 
 
 def _time_calls(function, arguments, repeats: int, block: int = 50, rounds: int = 3) -> dict:
@@ -211,6 +213,12 @@ def bench_servo() -> list[dict]:
     return run_servo_benchmarks()
 
 
+def bench_limits(repeats: int) -> list[dict]:
+    from bench_limits import filter_rows, node_rows, offline_rows
+
+    return filter_rows(repeats) + offline_rows() + node_rows()
+
+
 def _format_value(row: dict) -> str:
     parts = []
     for key, value in row.items():
@@ -260,6 +268,7 @@ def main() -> int:
         "liveview": bench_live_view,
         "physics": bench_physics,
         "servo": bench_servo,
+        "limits": lambda: bench_limits(args.repeats),
     }
     for section in chosen:
         print(f"[bench] {section} ...", file=sys.stderr, flush=True)
