@@ -621,6 +621,11 @@ def test_smallest_eigenvalue_bound_is_a_lower_bound(size_a, size_b, scale_b, spr
         assert bound == pytest.approx(determinant)
         return
     plain = determinant * ((size - 1) / (trace_a + trace_b)) ** (size - 1)
+    if determinant <= 0.0:
+        # A singular matrix whose determinant rounded below zero (seen: -6.6e-37): both bounds
+        # are <= 0 there and certify nothing, which is all the step needs of them.
+        assert bound <= 0.0 and plain <= 0.0
+        return
     assert bound >= plain * (1 - 1e-12)
     for shrink in np.linspace(0.01, 1.0, 25):
         for u_a, u_b in ((shrink, 1.0), (1.0, shrink)):

@@ -69,7 +69,9 @@ def test_every_case_keeps_the_limits_and_the_arm_ends_at_rest(harness):
 
 
 def test_a_goal_after_a_stop_is_followed_and_converges(harness):
-    model, hardware, node, diagnostics = start_held_arm(harness, "genova7", load_robot("genova7").start_configuration())
+    model, hardware, node, diagnostics = start_held_arm(
+        harness, "genova7", load_robot("genova7").start_configuration(), gain_linear=3.0, gain_angular=3.0
+    )
     try:
         call_service(harness, Trigger, f"{node.test_namespace}/cartesian_controller/stop", Trigger.Request())
         assert harness.spin_until(lambda: node.state == "stopped", 3)

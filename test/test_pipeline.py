@@ -152,17 +152,20 @@ def test_goal_wait_timeout_exits_1(genova):
     assert "NOT converged after" in result.stdout + result.stderr
 
 
-def test_goals_without_wait_are_each_taken(genova):
+def test_goals_without_wait_are_each_taken(genova, monkeypatch, capsys):
     """Six goals in a row without --wait: each command returns only once the controller reports
-    that goal's stamp as its goal (a lost one is sent again), so each is followed."""
+    that goal's stamp as its goal (a lost one is sent again), so each is followed. The command
+    runs in this process (a new process each time costs seconds of start and discovery)."""
+    from manip_kin.cli import main
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", genova.env["ROS_DOMAIN_ID"])
     client = genova.client()
     stamps = []
     for k in range(6):
-        result = run_cli(
-            genova, "goal", "--xyz", "0.2", f"{-0.66 - 0.01 * k:.2f}", "0.3", "--rpy", "0", "1.57", "0", "--json"
-        )
-        assert result.returncode == 0, result.stderr
-        stamps.append(json.loads(result.stdout)["stamp"])
+        code = main(["goal", "--xyz", "0.2", f"{-0.66 - 0.01 * k:.2f}", "0.3", "--rpy", "0", "1.57", "0", "--json"])
+        out = capsys.readouterr()
+        assert code == 0, out.err
+        stamps.append(json.loads(out.out)["stamp"])
     assert len(set(stamps)) == 6
     # The last one is the controller's goal now (each was, in turn: the CLI waited for it).
     assert client.spin_until(
