@@ -88,3 +88,29 @@ def colcon_install(tmp_path_factory) -> ColconInstall:
     env["PYTHONPATH"] = os.pathsep.join([str(site), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix), env.get("AMENT_PREFIX_PATH", sys.prefix)])
     return ColconInstall(prefix, prefix / "lib" / "manip_kin", prefix / "share" / "manip_kin", env)
+
+
+# The collision tests' robots (test_collision, test_qp_law): built once per module that uses them.
+@pytest.fixture(scope="module")
+def panda():
+    """The Panda of example-robot-data with its collision meshes and SRDF: ``(model, collision model)``."""
+    from collision_robots import panda_files
+
+    from manip_kin.collision.collision_model import load_collision_model
+    from manip_kin.urdf import load_urdf
+
+    urdf, srdf, share = panda_files()
+    model = load_urdf(urdf)
+    return model, load_collision_model(model, srdf=srdf, mesh_search_path=share)
+
+
+@pytest.fixture(scope="module")
+def ball_arm():
+    """The spheres-and-boxes test arm of collision_robots, pairs sampled: ``(model, collision model)``."""
+    from collision_robots import BALL_ARM_URDF
+
+    from manip_kin.collision.collision_model import load_collision_model
+    from manip_kin.urdf import load_urdf_string
+
+    model = load_urdf_string(BALL_ARM_URDF, tip_link="tip")
+    return model, load_collision_model(model, BALL_ARM_URDF, samples=300)

@@ -30,20 +30,6 @@ from manip_kin.rotations import make_transform
 from manip_kin.scene import Scene, make_obstacle
 from manip_kin.urdf import load_urdf, load_urdf_string
 
-
-@pytest.fixture(scope="module")
-def panda():
-    urdf, srdf, share = panda_files()
-    model = load_urdf(urdf)
-    return model, load_collision_model(model, srdf=srdf, mesh_search_path=share)
-
-
-@pytest.fixture(scope="module")
-def ball_arm():
-    model = load_urdf_string(BALL_ARM_URDF, tip_link="tip")
-    return model, load_collision_model(model, BALL_ARM_URDF, samples=300)
-
-
 # --- geometry on frames -------------------------------------------------------------------------
 
 

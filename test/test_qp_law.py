@@ -6,17 +6,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from collision_robots import (
-    BALL_ARM_URDF,
     PANDA_FOLDED,
     PANDA_READY,
     ball_obstacle_distance,
     fresh_hand_link1_distance,
-    panda_files,
 )
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from manip_kin.collision.collision_model import load_collision_model
 from manip_kin.collision.distances import CollisionChecker
 from manip_kin.control import CartesianController, ControllerConfig
 from manip_kin.kinematics import frame_pose, jacobian
@@ -27,23 +24,9 @@ from manip_kin.qp.tasks import PostureTask
 from manip_kin.robots import with_velocity_limits
 from manip_kin.rotations import make_transform
 from manip_kin.scene import Scene, make_obstacle
-from manip_kin.urdf import load_urdf, load_urdf_string
 
 DT = 0.001  # the offline loop's period [s]
 POSITION_TASK = ControllerConfig(task="position", gain_linear=3.0)
-
-
-@pytest.fixture(scope="module")
-def panda():
-    urdf, srdf, share = panda_files()
-    model = load_urdf(urdf)
-    return model, load_collision_model(model, srdf=srdf, mesh_search_path=share)
-
-
-@pytest.fixture(scope="module")
-def ball_arm():
-    model = load_urdf_string(BALL_ARM_URDF, tip_link="tip")
-    return model, load_collision_model(model, BALL_ARM_URDF, samples=300)
 
 
 def _sphere_scene(centre, radius) -> Scene:
