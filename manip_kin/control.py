@@ -200,7 +200,7 @@ class CartesianController:
 
     The controller keeps no state between steps (every step depends only on its arguments),
     so one instance may serve several loops. Building it generates and compiles the model's
-    unrolled code (a few milliseconds, cached per model and configuration).
+    unrolled code (a few milliseconds, cached per structure: chain, task rows, limits present).
 
     Attributes:
         model: the robot.

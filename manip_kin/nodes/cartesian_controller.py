@@ -1,12 +1,13 @@
-"""``cartesian_controller``: goal pose (+ feed-forward twist) or joint reference to joint-rate commands.
+"""``cartesian_controller``: pose goals, joint references, twists and jogs to joint-rate commands.
 
-The node holds one :class:`~manip_kin.control.CartesianController` and one
-:class:`~manip_kin.supervisors.ControllerSupervisor`; every cycle of its
-:class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state, goal pose,
-goal twist and joint reference, runs one control step and publishes
-``joint_velocity_commands``. The latest goal of either kind wins: a pose goal runs the
-cartesian law, a joint reference (``joint_reference``, a ``JointState`` with positions and
-velocities) the joint tracking law of :mod:`manip_kin.joint_control`.
+The node holds one :class:`~manip_kin.control.CartesianController` (or, with collision
+avoidance or a posture, the QP law), one :class:`~manip_kin.supervisors.ControllerSupervisor`
+and one :class:`~manip_kin.command_filter.CommandFilter`; every cycle of its
+:class:`~manip_kin.nodes.rate_loop.RateLoop` it takes the newest joint state and commands, runs
+one control step for the newest command of any kind (a pose goal with its feed-forward twist,
+a joint reference, ``twist_command``, ``joint_jog``) and publishes the filter's next command on
+``joint_velocity_commands``: within the joint limits, always. ``~/stop`` and ``~/pause`` and
+every way the node ends bring the commands to rest (:meth:`CartesianControllerNode.halt`).
 ``/diagnostics`` carries the state (see :data:`STATES`), the errors and the loop timing,
 at ``diagnostics_rate_hz`` and at once when the state changes.
 """
