@@ -46,6 +46,9 @@ def _moving_arm(tmp_path):
     # The test process's domain: the fake arm lives in this process.
     pipeline = Pipeline([controller], log_dir=tmp_path)
     pipeline.start()
+    # The arm hears the controller before anything moves (a late match would miss a ramp's start).
+    client = pipeline.client()
+    assert client.spin_until(lambda: hardware.commands_received > 0, 20), pipeline.log_tail("cartesian_controller")
     return hardware, pipeline
 
 
