@@ -15,6 +15,7 @@ import tempfile
 import time
 
 import numpy as np
+from bench_nodes import _samples
 
 
 def _twist_latency_row(rate_hz: float, priority: int, trials: int) -> dict:
@@ -65,7 +66,7 @@ def _twist_latency_row(rate_hz: float, priority: int, trials: int) -> dict:
                 if any(tail.unpack_from(taken[0], len(taken[0]) - tail.size)):
                     latencies.append((time.monotonic_ns() - sent) * 1e-6)
                     break
-    values = np.array(latencies) if latencies else np.array([np.nan])
+    values = _samples(latencies)
     scheduling = f"SCHED_FIFO {priority}" if priority else "normal scheduling"
     return {
         "metric": f"twist-to-first-moving-command latency, genova7 at {rate_hz:g} Hz, {scheduling}",

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -149,13 +149,6 @@ class JointLimits:
         for array in (velocity, acceleration, jerk):
             array.flags.writeable = False
         return cls(limits, velocity, acceleration, jerk)
-
-    def with_joint(self, model: RobotModel, name: str, **fields) -> JointLimits:
-        """A copy with some fields of joint ``name`` changed (live tuning)."""
-        index = model.joint_names.index(name)
-        per_joint = dict(zip(model.joint_names, self.per_joint))
-        per_joint[name] = replace(self.per_joint[index], **fields)
-        return JointLimits.of(model, per_joint)
 
     @property
     def limits_acceleration(self) -> bool:
