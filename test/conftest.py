@@ -16,6 +16,7 @@ from hypothesis import settings
 
 # manip_kin.pipeline does not import rclpy, so the environment is still set before rclpy loads.
 from manip_kin.pipeline import pick_free_domain
+from manip_kin.pipeline.domain import use_prompt_acknowledgements
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,6 +26,8 @@ os.environ["ROS_DOMAIN_ID"] = str(pick_free_domain())
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# The test process is a client (it waits for acknowledgements); the nodes it starts are not.
+use_prompt_acknowledgements()
 
 # Hypothesis: derandomized (examples are a fixed function of the test), so a failure reproduces
 # on any machine; print_blob lets one replay a failing example with @reproduce_failure.

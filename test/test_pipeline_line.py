@@ -79,8 +79,9 @@ def test_irb120_line_tracked_along_the_segment(irb120):
         PoseStamped,
         "/tool_pose",
         lambda m: samples.append(conv.pose_stamped_to_matrix(m)),
-        # Deep: send_line blocks in wait_for_all_acked (up to a DDS heartbeat, seconds) without
-        # spinning, while 500 poses a second queue up; a 1000-deep queue lost the line's start.
+        # Deep: send_line waits for the acknowledgement (a DDS heartbeat: 20 ms for this client,
+        # seconds at Fast DDS's default) while 500 poses a second queue up; a 1000-deep queue
+        # lost the line's start.
         20000,
     )
     # The subscription is matched before the line starts: a sample arrives.

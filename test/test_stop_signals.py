@@ -60,7 +60,9 @@ def _far_goal():
 
 def _wait_moving(client, hardware, speed=0.05):
     moving = lambda: (c := hardware.held_command()) is not None and np.abs(c).max() > speed  # noqa: E731
-    assert client.spin_until(moving, 10), hardware.held_command()
+    if not client.spin_until(moving, 10):
+        status = client.latest_status("cartesian_controller")
+        raise AssertionError((hardware.held_command(), status and status.values))
 
 
 def _assert_brought_to_rest(client, hardware):
@@ -78,7 +80,8 @@ def test_a_signal_mid_motion_halts_the_arm_within_the_limits(tmp_path, sig):
     hardware, pipeline = _moving_arm(tmp_path)
     try:
         client = pipeline.client()
-        client.send_goal(_far_goal())
+        # Taken, not just acknowledged (a goal lost on the way is sent again), then moving.
+        client.wait_taken(client.send_goal(_far_goal()))
         _wait_moving(client, hardware)
         signalled = time.monotonic()
         code = pipeline.stop_process("cartesian_controller", timeout=5.0, sig=sig)

@@ -150,7 +150,7 @@ class CommandStream:
         finally:
             self.client.node.destroy_client(service)
         # The zeros went out with publish(); a lost one is sent again while the process lives, so
-        # it stays up to ZERO_ACK_WAIT_S for the acknowledgement (which can wait for a heartbeat).
+        # it stays up to ZERO_ACK_WAIT_S for the acknowledgement (at the client's 20 ms heartbeat).
         deadline = time.monotonic() + ZERO_ACK_WAIT_S
         for topic in self._last:
             publisher = self.client.publisher(self._types[topic], topic)

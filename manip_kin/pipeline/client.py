@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.errors import InvalidArgumentError
-from manip_kin.pipeline.domain import ensure_ros_isolation
+from manip_kin.pipeline.domain import ensure_ros_isolation, use_prompt_acknowledgements
 from manip_kin.pipeline.errors import PipelineError
 from manip_kin.pipeline.outcome import GoalOutcome, goal_outcome, taken
 
@@ -131,6 +131,7 @@ class PipelineClient:
 
         self._state_types = (JointState, PoseStamped)
         environ = ensure_ros_isolation() if env is None else env
+        use_prompt_acknowledgements()  # before this process's first participant
         domain = int(environ.get("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0")))
         # rclpy reads the discovery range from this process's environment.
         os.environ.setdefault(
@@ -300,7 +301,8 @@ class PipelineClient:
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
         publisher.publish(msg)
-        # Fast DDS acknowledges at the writer's next periodic heartbeat, up to ~3 s later: keep
+        # Fast DDS acknowledges at the writer's next heartbeat (20 ms with the client profile of
+        # use_prompt_acknowledgements, 3 s where a caller's own profile keeps the default): keep
         # spinning meanwhile, or the statuses of that time (a goal reached before its
         # acknowledgement) would be taken in late, with late arrival times.
         deadline = time.monotonic() + timeout

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.pipeline.client import PipelineClient, normalize_namespace, status_name
-from manip_kin.pipeline.domain import ensure_ros_isolation
+from manip_kin.pipeline.domain import ensure_ros_isolation, node_environment
 from manip_kin.pipeline.errors import PipelineError
 
 #: Node executables of the pipeline, in start order.
@@ -253,7 +253,7 @@ class Pipeline:
         if old is not None and old.poll() is None:
             raise PipelineError(f"{name} is already running (pid {old.pid})")
         command = [find_executable(spec.executable, self.executable_dir)] + spec.arguments()
-        env = self.env
+        env = node_environment(self.env)
         log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed in stop
         if name in self._killed and FAST_DDS_TRANSPORTS not in env:
             # Fast DDS 2.14 (Jazzy): the shared-memory port a SIGKILLed process leaves behind can

@@ -180,6 +180,9 @@ def replay(
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
+    from manip_kin.pipeline.domain import use_prompt_acknowledgements
+
+    use_prompt_acknowledgements()  # a player wants its last samples acknowledged before it exits
     context = rclpy.Context()
     # No rclpy signal handlers: Ctrl-C stays a KeyboardInterrupt that ends the loop at once.
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -214,9 +217,9 @@ def replay(
             path, info, options, selected, publishers, clock_publisher, clock_class, progress, should_stop, on_published
         )
         for publisher in publishers.values():
-            # Reliable samples still in flight would be lost if the process exited now. Fast DDS
-            # learns of acks only at its heartbeat period (seconds), so the wait is kept short:
-            # publishing is synchronous, the samples are already on the wire.
+            # Reliable samples still in flight would be lost if the process exited now. Acks come
+            # at the writers' heartbeat (20 ms here, use_prompt_acknowledgements); the wait stays
+            # short where a caller's own profile keeps Fast DDS's 3 s.
             publisher.wait_for_all_acked(_duration(ACK_WAIT_S))
         return report
     finally:
