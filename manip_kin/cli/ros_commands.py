@@ -132,7 +132,7 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     try:
         from geometry_msgs.msg import PoseStamped
 
-        client.wait_subscribers(PoseStamped, topic, args.timeout)  # "nobody listens" first
+        client.wait_subscribers(PoseStamped, topic, args.timeout, latched=True)  # "nobody listens" first
         statuses = [client.wait_status(node, args.timeout) for node in ready_nodes]
         client.base_frame = args.frame or statuses[-1].values.get("base_frame") or "base_link"
         if position_only:

@@ -14,6 +14,7 @@ sets the environment before rclpy loads).
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -29,6 +30,9 @@ from manip_kin.pipeline.outcome import GoalOutcome, goal_outcome, taken
 GOAL_RESEND_AFTER_S = 1.0
 #: Times a goal or line target is sent again at most.
 GOAL_RESENDS = 3
+#: Seconds a one-shot message waits for a recorder in the graph to subscribe to its topic: a few
+#: of the recorder's discovery periods (0.5 s), for a loaded machine.
+RECORDER_JOIN_S = 3.0
 
 
 @dataclass
@@ -255,28 +259,36 @@ class PipelineClient:
 
     # --- publishing ------------------------------------------------------------------------------
 
-    def publisher(self, msg_type, topic: str):
-        """A reliable depth-10 publisher on ``topic`` (relative names resolve in the namespace; created once)."""
-        key = f"{topic}:{msg_type.__name__}"
+    def publisher(self, msg_type, topic: str, latched: bool = False):
+        """A reliable publisher on ``topic`` (relative names resolve in the namespace; created once).
+
+        ``latched``: transient local, depth 1, for a one-shot message (a goal, a line target):
+        a recorder that subscribes after it went out still gets it. Otherwise volatile, depth 10
+        (streams).
+        """
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        key = f"{topic}:{msg_type.__name__}:{'latched' if latched else 'volatile'}"
         if key not in self._publishers:
-            self._publishers[key] = self.node.create_publisher(msg_type, topic, 10)
+            qos = QoSProfile(
+                depth=1 if latched else 10,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            )
+            self._publishers[key] = self.node.create_publisher(msg_type, topic, qos)
         return self._publishers[key]
 
-    def wait_subscribers(self, msg_type, topic: str, timeout: float = 10.0, subscribers: int = 1):
-        """The publisher on ``topic`` once every known subscription (at least ``subscribers``) matched it.
+    def wait_subscribers(
+        self, msg_type, topic: str, timeout: float = 10.0, subscribers: int = 1, latched: bool = False
+    ):
+        """The publisher on ``topic`` (see :meth:`publisher`) once every known subscription (at
+        least ``subscribers``) matched it.
 
         Raises:
             PipelineError: no subscriber within ``timeout``.
         """
-        publisher = self.publisher(msg_type, topic)
-
-        def all_matched() -> bool:
-            # Every subscription the graph knows must be matched, not just the first one:
-            # with a recorder running, it may match before the controller does.
-            known = len(self.node.get_subscriptions_info_by_topic(publisher.topic_name))
-            return publisher.get_subscription_count() >= max(subscribers, known)
-
-        matched = self.spin_until(all_matched, timeout)
+        publisher = self.publisher(msg_type, topic, latched)
+        matched = self.spin_until(lambda: self._all_matched(publisher, subscribers), timeout)
         if not matched:
             raise PipelineError(
                 f"no subscriber on {publisher.topic_name} after {timeout:g} s "
@@ -284,8 +296,21 @@ class PipelineClient:
             )
         return publisher
 
+    def _all_matched(self, publisher, subscribers: int = 1) -> bool:
+        # Every subscription the graph knows must be matched, not just the first one:
+        # with a recorder running, it may match before the controller does.
+        known = len(self.node.get_subscriptions_info_by_topic(publisher.topic_name))
+        return publisher.get_subscription_count() >= max(subscribers, known)
+
     def publish_delivered(self, topic: str, msg, timeout: float = 10.0, subscribers: int = 1) -> int:
-        """Publish ``msg`` once a subscriber is matched, and wait until they acknowledged it.
+        """Publish ``msg`` (latched, see :meth:`publisher`) once every known subscriber is
+        matched, and wait until every reader has acknowledged it, recorders included.
+
+        A recorder of all topics (``recorder -p all_topics:=true``, ``ros2 bag record -a``)
+        subscribes only once it discovers this client's publisher, often after the message
+        went out: it gets the message from the latched publisher, so this waits, at most
+        :data:`RECORDER_JOIN_S` (and ``timeout``), for each recorder in the graph that may
+        record this topic to subscribe and acknowledge (:meth:`_recorders_missing`).
 
         Returns:
             The number of matched subscriptions.
@@ -293,22 +318,75 @@ class PipelineClient:
         Raises:
             PipelineError: no subscriber within ``timeout`` or no acknowledgement.
         """
-        from rclpy.duration import Duration
-
-        publisher = self.wait_subscribers(type(msg), topic, timeout, subscribers)
+        publisher = self.wait_subscribers(type(msg), topic, timeout, subscribers, latched=True)
         # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
         publisher.publish(msg)
+        deadline = time.monotonic() + timeout
+        self._wait_acknowledged(publisher, deadline, timeout)
+        join_deadline = min(deadline, time.monotonic() + RECORDER_JOIN_S)
+        recorders = self._recorders_missing(publisher)
+        while recorders and time.monotonic() < join_deadline:
+            self._executor.spin_once(timeout_sec=0.02)
+            recorders = self._recorders_missing(publisher, recorders)
+        if recorders:
+            names = ", ".join(f"{ns.rstrip('/')}/{name}" for name, ns in sorted(recorders))
+            print(
+                f"warning: {names} did not subscribe to {publisher.topic_name} within {RECORDER_JOIN_S:g} s: "
+                "its recording may lack this message",
+                file=sys.stderr,
+            )
+        self.spin_until(lambda: self._all_matched(publisher), max(join_deadline - time.monotonic(), 0.0))
+        self._wait_acknowledged(publisher, deadline, timeout)
+        return publisher.get_subscription_count()
+
+    def _wait_acknowledged(self, publisher, deadline: float, timeout: float) -> None:
+        """Spin until every matched reader acknowledged what ``publisher`` sent."""
+        from rclpy.duration import Duration
+
         # Fast DDS acknowledges at the writer's next periodic heartbeat, up to ~3 s later: keep
         # spinning meanwhile, or the statuses of that time (a goal reached before its
         # acknowledgement) would be taken in late, with late arrival times.
-        deadline = time.monotonic() + timeout
         while not publisher.wait_for_all_acked(Duration(seconds=0)):
             if time.monotonic() > deadline:
                 raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
             self._executor.spin_once(timeout_sec=0.01)
-        return publisher.get_subscription_count()
+
+    def _recorders_missing(self, publisher, candidates: set | None = None) -> set[tuple[str, str]]:
+        """Recorder nodes (name containing ``recorder``; ``(name, namespace)``) of the graph,
+        or of ``candidates``, that have no subscription on ``publisher``'s topic yet and may
+        record it: a manip_kin recorder that does not record all topics subscribed its topics
+        at start, so one without a subscription here never will."""
+        if candidates is None:
+            candidates = {
+                (name, namespace)
+                for name, namespace in self.node.get_node_names_and_namespaces()
+                if "recorder" in name and not self._records_a_list(name, namespace)
+            }
+        subscribed = {
+            (info.node_name, info.node_namespace)
+            for info in self.node.get_subscriptions_info_by_topic(publisher.topic_name)
+        }
+        return {node for node in candidates if node not in subscribed}
+
+    def _records_a_list(self, name: str, namespace: str) -> bool:
+        """True for a manip_kin recorder whose ``all_topics`` is false (asked briefly; False
+        when it cannot be asked, e.g. rosbag2's recorder)."""
+        from rcl_interfaces.msg import ParameterType
+        from rcl_interfaces.srv import GetParameters
+
+        client = self.node.create_client(GetParameters, f"{namespace.rstrip('/')}/{name}/get_parameters")
+        try:
+            if not client.wait_for_service(timeout_sec=0.5):
+                return False
+            future = client.call_async(GetParameters.Request(names=["all_topics"]))
+            if not self.spin_until(future.done, 0.5) or future.result() is None:
+                return False
+            values = future.result().values
+            return bool(values) and values[0].type == ParameterType.PARAMETER_BOOL and not values[0].bool_value
+        finally:
+            self.node.destroy_client(client)
 
     def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
         """A ``PoseStamped`` of a 4x4 pose stamped now (the stamp identifies it in /diagnostics)."""
@@ -516,7 +594,7 @@ class PipelineClient:
             superseded = False
         if superseded:
             return  # the node has moved on to a newer one: ours is not wanted any more
-        self.publisher(type(sent.msg), topic).publish(sent.msg)
+        self.publisher(type(sent.msg), topic, latched=True).publish(sent.msg)
         sent.sent_at = time.monotonic()
         sent.resends += 1
 
