@@ -56,8 +56,10 @@ def processes():
         process.communicate(timeout=10)
 
 
-def start_recorder(processes: list, output: Path, *parameters: str) -> subprocess.Popen:
-    command = [str(RECORDER), "--ros-args", "-p", f"output:={output}"]
+def start_recorder(processes: list, output: Path, *parameters: str, namespace: str = "") -> subprocess.Popen:
+    command = [str(RECORDER), "--ros-args", "-p", f"output:={output}"] + (
+        ["-r", f"__ns:={namespace}"] if namespace else []
+    )
     for parameter in parameters:
         command += ["-p", parameter]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -350,15 +352,20 @@ def test_an_all_topics_recording_has_the_one_shot_messages_of_a_client(ros, proc
     from geometry_msgs.msg import PoseStamped
 
     from manip_kin.pipeline import PipelineClient
+    from manip_kin.pipeline.recorders import recorder_nodes
 
     output = tmp_path / "all.mcap"
     recorder = start_recorder(processes, output, "all_topics:=true", "compression:=none")
+    # A recorder of a topic list is not waited for: it subscribed its topics at start.
+    start_recorder(processes, tmp_path / "listed.mcap", "topics:=[joint_states]", namespace="/listed")
     ros.create_subscription(PoseStamped, "/line_target", lambda msg: None, 10)  # the generator's stand-in
     deadline = time.monotonic() + 20
-    while "recorder" not in ros.get_node_names():
-        assert time.monotonic() < deadline and recorder.poll() is None, "the recorder did not come up"
+    while ros.get_node_names().count("recorder") < 2:
+        assert time.monotonic() < deadline and recorder.poll() is None, "the recorders did not come up"
         time.sleep(0.05)
     with PipelineClient() as client:
+        assert client.spin_until(lambda: len(recorder_nodes(client.node)) == 2, 20)
+        assert client._possible_recorders() == {("recorder", "/")}  # not /listed/recorder
         stamp = client.send_line(np.eye(4), timeout=10)
         stayed = any(
             info.node_name == "recorder" for info in client.node.get_subscriptions_info_by_topic("/line_target")

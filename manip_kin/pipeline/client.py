@@ -25,6 +25,7 @@ from manip_kin.errors import InvalidArgumentError
 from manip_kin.pipeline.domain import ensure_ros_isolation
 from manip_kin.pipeline.errors import PipelineError
 from manip_kin.pipeline.outcome import GoalOutcome, goal_outcome, taken
+from manip_kin.pipeline.recorders import ASK_TIMEOUT_S, recorder_nodes, recorders_without, records_a_list
 
 #: Seconds without its node reporting a goal or line target of ours after which it is sent again.
 GOAL_RESEND_AFTER_S = 1.0
@@ -310,7 +311,7 @@ class PipelineClient:
         subscribes only once it discovers this client's publisher, often after the message
         went out: it gets the message from the latched publisher, so this waits, at most
         :data:`RECORDER_JOIN_S` (and ``timeout``), for each recorder in the graph that may
-        record this topic to subscribe and acknowledge (:meth:`_recorders_missing`).
+        record this topic to subscribe and acknowledge (:mod:`manip_kin.pipeline.recorders`).
 
         Returns:
             The number of matched subscriptions.
@@ -326,10 +327,10 @@ class PipelineClient:
         deadline = time.monotonic() + timeout
         self._wait_acknowledged(publisher, deadline, timeout)
         join_deadline = min(deadline, time.monotonic() + RECORDER_JOIN_S)
-        recorders = self._recorders_missing(publisher)
+        recorders = recorders_without(self.node, publisher.topic_name, self._possible_recorders())
         while recorders and time.monotonic() < join_deadline:
             self._executor.spin_once(timeout_sec=0.02)
-            recorders = self._recorders_missing(publisher, recorders)
+            recorders = recorders_without(self.node, publisher.topic_name, recorders)
         if recorders:
             names = ", ".join(f"{ns.rstrip('/')}/{name}" for name, ns in sorted(recorders))
             print(
@@ -340,6 +341,14 @@ class PipelineClient:
         self.spin_until(lambda: self._all_matched(publisher), max(join_deadline - time.monotonic(), 0.0))
         self._wait_acknowledged(publisher, deadline, timeout)
         return publisher.get_subscription_count()
+
+    def _possible_recorders(self) -> set[tuple[str, str]]:
+        """The recorders of the graph that may record a topic they have not subscribed yet."""
+        return {
+            node
+            for node in recorder_nodes(self.node)
+            if not records_a_list(self.node, *node, lambda future: self.spin_until(future.done, ASK_TIMEOUT_S))
+        }
 
     def _wait_acknowledged(self, publisher, deadline: float, timeout: float) -> None:
         """Spin until every matched reader acknowledged what ``publisher`` sent."""
@@ -352,41 +361,6 @@ class PipelineClient:
             if time.monotonic() > deadline:
                 raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
             self._executor.spin_once(timeout_sec=0.01)
-
-    def _recorders_missing(self, publisher, candidates: set | None = None) -> set[tuple[str, str]]:
-        """Recorder nodes (name containing ``recorder``; ``(name, namespace)``) of the graph,
-        or of ``candidates``, that have no subscription on ``publisher``'s topic yet and may
-        record it: a manip_kin recorder that does not record all topics subscribed its topics
-        at start, so one without a subscription here never will."""
-        if candidates is None:
-            candidates = {
-                (name, namespace)
-                for name, namespace in self.node.get_node_names_and_namespaces()
-                if "recorder" in name and not self._records_a_list(name, namespace)
-            }
-        subscribed = {
-            (info.node_name, info.node_namespace)
-            for info in self.node.get_subscriptions_info_by_topic(publisher.topic_name)
-        }
-        return {node for node in candidates if node not in subscribed}
-
-    def _records_a_list(self, name: str, namespace: str) -> bool:
-        """True for a manip_kin recorder whose ``all_topics`` is false (asked briefly; False
-        when it cannot be asked, e.g. rosbag2's recorder)."""
-        from rcl_interfaces.msg import ParameterType
-        from rcl_interfaces.srv import GetParameters
-
-        client = self.node.create_client(GetParameters, f"{namespace.rstrip('/')}/{name}/get_parameters")
-        try:
-            if not client.wait_for_service(timeout_sec=0.5):
-                return False
-            future = client.call_async(GetParameters.Request(names=["all_topics"]))
-            if not self.spin_until(future.done, 0.5) or future.result() is None:
-                return False
-            values = future.result().values
-            return bool(values) and values[0].type == ParameterType.PARAMETER_BOOL and not values[0].bool_value
-        finally:
-            self.node.destroy_client(client)
 
     def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
         """A ``PoseStamped`` of a 4x4 pose stamped now (the stamp identifies it in /diagnostics)."""
