@@ -227,6 +227,9 @@ class ControllerSupervisor:
         self.progress = ProgressMonitor(int(config.progress_window * 1e9))
         #: The errors when the goal was found unreachable: ``(position [m], orientation [rad])``.
         self.unreachable_errors: tuple[float, float] | None = None
+        #: When the current goal was first within tolerance [ns, the loop's clock]; None before.
+        #: A goal reached, left (pushed away) and reached again keeps its first time.
+        self.converged_ns: int | None = None
         self._paused = False
 
     def reconfigure(self, config: ControllerSupervisorConfig, diagnostics_period_ns: int) -> None:
@@ -256,6 +259,7 @@ class ControllerSupervisor:
         self._reference_moving = bool(moving) and self.goal_kind is GoalKind.JOINT
         self.progress.restart()
         self.unreachable_errors = None
+        self.converged_ns = None
         if self.state in _UNTIL_NEW_GOAL:
             self._set(ControllerState.TRACKING, "new goal")
 
@@ -344,7 +348,7 @@ class ControllerSupervisor:
             and orientation_error <= self.config.orientation_tolerance
         ):
             self.progress.restart()
-            self._set(ControllerState.CONVERGED, "goal reached within tolerance")
+            self._converged(now_ns)
         elif goal_moving:
             self.progress.restart()
             self._classify_limits(limited, "moving towards the goal")
@@ -382,15 +386,20 @@ class ControllerSupervisor:
         else:
             self._classify_limits(limited_joints, f"following the {self.goal_kind} command")
 
-    def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool) -> None:
+    def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool, now_ns: int = 0) -> None:
         """Classify a joint tracking step: converged when the reference rests (or its velocity
         is no longer used) and every joint is within tolerance of it."""
         error = float(np.max(np.abs(output.joint_error))) if len(output.joint_error) else 0.0
         reference_moving = feed_forward_used and self._reference_moving
         if not reference_moving and error <= self.config.joint_tolerance:
-            self._set(ControllerState.CONVERGED, "joint reference reached within tolerance")
+            self._converged(now_ns, "joint reference reached within tolerance")
         else:
             self._classify_limits(output.limited_joints, "following the joint reference")
+
+    def _converged(self, now_ns: int, detail: str = "goal reached within tolerance") -> None:
+        if self.converged_ns is None:
+            self.converged_ns = now_ns
+        self._set(ControllerState.CONVERGED, detail)
 
     def _classify_limits(self, limited_joints: Sequence[int], tracking_detail: str) -> None:
         if limited_joints:
@@ -503,6 +512,11 @@ class GeneratorSupervisor:
         self.progress = 0.0
         self.state, self.detail = GeneratorState.STREAMING, detail
         return preempted
+
+    @property
+    def started_ns(self) -> int | None:
+        """When the current motion started [ns, the loop's clock]; None before the first."""
+        return self._start_ns if self.motion is not None else None
 
     def time_into_motion(self, now_ns: int) -> tuple[float, bool] | None:
         """While streaming: ``(t [s] clipped to the duration, finished)``; None otherwise."""

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from manip_kin.cli import build_parser
-from manip_kin.nodes import cartesian_controller, robot_state, trajectory_generator
+from manip_kin.nodes import cartesian_controller, live_view, recorder_config, robot_state, trajectory_generator
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,7 +22,7 @@ def _section(title: str) -> str:
 
 
 def _default_text(spec) -> str:
-    if spec.default is None:
+    if spec.default is None or spec.default_text:
         return spec.default_text
     if isinstance(spec.default, bool):
         return "`true`" if spec.default else "`false`"
@@ -31,7 +31,9 @@ def _default_text(spec) -> str:
     return f"`{spec.default:g}`" if isinstance(spec.default, float) else f"`{spec.default}`"
 
 
-@pytest.mark.parametrize("module", [robot_state, cartesian_controller, trajectory_generator])
+@pytest.mark.parametrize(
+    "module", [robot_state, cartesian_controller, trajectory_generator, recorder_config, live_view]
+)
 def test_every_node_parameter_is_documented_with_default_unit_liveness_and_range(module):
     rows = {}
     for line in _section(module.NODE_NAME).splitlines():

@@ -17,19 +17,28 @@ from manip_kin.control import CartesianController, ControllerConfig
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.joint_control import joint_tracking_step
 from manip_kin.kinematics import frame_pose
-from manip_kin.nodes import cartesian_controller_interface, robot_state, trajectory_generator_interface
+from manip_kin.nodes import (
+    cartesian_controller_interface,
+    live_view,
+    recorder_config,
+    robot_state,
+    trajectory_generator_interface,
+)
 from manip_kin.nodes.params import QUOTE_LENGTH, ParamSpec, period_ns
 from manip_kin.robots import load_robot
 from manip_kin.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
 from manip_kin.supervisors import StatusThrottle
 from manip_kin.trajectory import TIME_SCALINGS, LineTrajectory, MotionLimits
 
+LOOP_NODES = (robot_state, cartesian_controller_interface, trajectory_generator_interface)
 TABLES = {
     module.NODE_NAME: {spec.name: spec for spec in module.PARAMETERS}
-    for module in (robot_state, cartesian_controller_interface, trajectory_generator_interface)
+    for module in (*LOOP_NODES, recorder_config, live_view)
 }
+LOOP_TABLES = {module.NODE_NAME: TABLES[module.NODE_NAME] for module in LOOP_NODES}
 CONTROLLER = TABLES["cartesian_controller"]
 GENERATOR = TABLES["trajectory_generator"]
+RECORDER = TABLES["recorder"]
 NUMBERS = [
     pytest.param(spec, id=f"{node}.{name}")
     for node, table in TABLES.items()
@@ -99,6 +108,11 @@ def test_the_reported_hostile_values_are_refused():
         (GENERATOR, "path_points", 10**12),  # MemoryError on the next line
         (CONTROLLER, "rate_hz", 1e-300),
         (GENERATOR, "max_linear_velocity", 1e-300),  # an infinite duration
+        (RECORDER, "tf_rate_hz", 1e-300),  # OverflowError at start: int(1e9 / rate)
+        (RECORDER, "duration", 1e300),  # a timer period beyond any integer of ns
+        (RECORDER, "max_messages", 10**15),
+        (TABLES["live_view"], "rate_hz", 1e-300),
+        (TABLES["live_view"], "port", 70000),
     ):
         with pytest.raises(InvalidArgumentError, match=f"parameter {name} = "):
             table[name].coerce(value)
@@ -117,6 +131,10 @@ def test_the_reported_hostile_values_are_refused():
         (CONTROLLER, "velocity_limits", "1.0", "(text) has the wrong type"),
         (CONTROLLER, "respect_velocity_limits", 1, "(int) has the wrong type; valid: true or false"),
         (CONTROLLER, "frame", 5, "(int) has the wrong type; valid: a string"),
+        (RECORDER, "duration", "2", "(text) has the wrong type; valid: a number"),
+        (RECORDER, "topics", [5], "(list) has the wrong type; valid: a list of strings"),
+        (RECORDER, "topics", "joint_states", "(text) has the wrong type; valid: a list of strings"),
+        (RECORDER, "all_topics", 1, "(int) has the wrong type; valid: true or false"),
     ],
 )
 def test_types_are_strict(table, name, value, words):
@@ -158,7 +176,7 @@ def test_refusals_quote_at_most_80_characters_of_the_value(name, value):
 # --- no value in the ranges raises or gives a non-finite output -----------------------------------
 
 
-@given(rate=st.one_of(*(in_range(TABLES[node]["diagnostics_rate_hz"]) for node in TABLES)))
+@given(rate=st.one_of(*(in_range(table["diagnostics_rate_hz"]) for table in LOOP_TABLES.values())))
 def test_diagnostics_periods_are_finite_integers_for_every_valid_rate(rate):
     period = period_ns(rate)
     assert isinstance(period, int)

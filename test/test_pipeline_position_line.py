@@ -80,6 +80,11 @@ def test_position_only_line_at_constant_speed(irb120):
     sent_ago = time.time() - conv.stamp_key_to_ns(report["stamp"]) * 1e-9
     heard = client.time_to_converge(final_stamp, time.monotonic() - sent_ago)
     assert report["time"] == pytest.approx(heard, abs=0.25), (report["time"], heard)
+    # When the line's last sample went out and when the arm settled, both from the line's start
+    # (the generator's and the controller's own times): the tail after the line is apart.
+    assert report["motion_time"] == pytest.approx(report["line_duration"], abs=0.05), report
+    assert report["motion_time"] < report["settle_time"] <= report["time"], report
+    assert report["settle_tolerance"] == "0.0001 m"  # task position: the orientation is free
     stamps_ns = np.array([conv.stamp_to_ns(m.header.stamp) for m in samples])
     stamps = (stamps_ns - stamps_ns[0]) * 1e-9  # integer ns first: 1e9 s in float is ±0.2 µs
     positions = np.array([[m.pose.position.x, m.pose.position.y, m.pose.position.z] for m in samples])

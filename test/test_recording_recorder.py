@@ -56,8 +56,10 @@ def processes():
         process.communicate(timeout=10)
 
 
-def start_recorder(processes: list, output: Path, *parameters: str) -> subprocess.Popen:
-    command = [str(RECORDER), "--ros-args", "-p", f"output:={output}"]
+def start_recorder(processes: list, output: Path, *parameters: str, namespace: str = "") -> subprocess.Popen:
+    command = [str(RECORDER), "--ros-args", "-p", f"output:={output}"] + (
+        ["-r", f"__ns:={namespace}"] if namespace else []
+    )
     for parameter in parameters:
         command += ["-p", parameter]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -340,3 +342,37 @@ def test_final_drain_after_shutdown_counts_the_gap_and_completes_the_file(ros, r
     assert f"{lost} dropped (/joint_states: {lost})" in line, line
     positions = [m.position[0] for _, m in read_with_rosbags(output)["/joint_states"]]
     assert positions == [0.0] + [float(i) for i in range(lost + 1, burst + 1)]
+
+
+def test_an_all_topics_recording_has_the_one_shot_messages_of_a_client(ros, processes, tmp_path):
+    # Issue 29: an all_topics recorder subscribes a topic once it discovers its publisher; the
+    # CLI's line target went out and its publisher left before that, and the recording lacked
+    # it. The client's one-shot publisher is latched, and it stays until the recorder has it.
+    import numpy as np
+    from geometry_msgs.msg import PoseStamped
+
+    from manip_kin.pipeline import PipelineClient
+    from manip_kin.pipeline.recorders import recorder_nodes
+
+    output = tmp_path / "all.mcap"
+    recorder = start_recorder(processes, output, "all_topics:=true", "compression:=none")
+    # A recorder of a topic list is not waited for: it subscribed its topics at start.
+    start_recorder(processes, tmp_path / "listed.mcap", "topics:=[joint_states]", namespace="/listed")
+    ros.create_subscription(PoseStamped, "/line_target", lambda msg: None, 10)  # the generator's stand-in
+    deadline = time.monotonic() + 20
+    while ros.get_node_names().count("recorder") < 2:
+        assert time.monotonic() < deadline and recorder.poll() is None, "the recorders did not come up"
+        time.sleep(0.05)
+    with PipelineClient() as client:
+        assert client.spin_until(lambda: len(recorder_nodes(client.node)) == 2, 20)
+        assert client._possible_recorders() == {("recorder", "/")}  # not /listed/recorder
+        stamp = client.send_line(np.eye(4), timeout=10)
+        stayed = any(
+            info.node_name == "recorder" for info in client.node.get_subscriptions_info_by_topic("/line_target")
+        )
+    assert stayed  # the client left only once the recorder had subscribed
+    recorder.send_signal(signal.SIGINT)
+    _, stderr = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, stderr
+    recorded = read_with_rosbags(output)["/line_target"]
+    assert [f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}" for _, m in recorded] == [stamp]

@@ -25,6 +25,7 @@ import numpy as np
 from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.kinematics import frame_pose, jacobian
+from manip_kin.pipeline.outcome import motion_timing
 from manip_kin.plant import PLANT_NAMES
 from manip_kin.robots import load_robot
 from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
@@ -196,24 +197,31 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
         for title, send, target in legs:
             print(f"{title}: {_pose_line(target)}", flush=True)
             started = time.monotonic()
-            stamp = send(target)
+            sent_stamp = stamp = send(target)
+            generator = None
             if send == client.send_line:
-                status = client.wait_line_done(stamp, timeout=args.timeout)
-                if status.message != "holding":
-                    print(f"  line rejected: {status.values.get('last_rejection')}")
+                generator = client.wait_line_done(stamp, timeout=args.timeout)
+                if generator.message != "holding":
+                    print(f"  line rejected: {generator.values.get('last_rejection')}")
                     exit_code = 1
                     continue
-                stamp = status.values.get("final_goal_stamp", stamp)
+                stamp = generator.values.get("final_goal_stamp", stamp)
             converged, status = client.wait_converged(stamp, timeout=args.timeout)
             took = client.time_to_converge(stamp, started)
+            timing = motion_timing(
+                sent_stamp, status.values if status else {}, generator.values if generator is not None else None
+            )
             errors = (
                 f"position {status.number('position_error'):.2e} m, orientation {status.number('orientation_error'):.2e} rad"
                 if status is not None
                 else "no status"
             )
-            print(
-                f"  {'converged' if converged else 'NOT converged'} in {took:.2f} s; final error {errors}", flush=True
+            verdict = (
+                f"converged ({timing.text('line')})"
+                if converged and timing.settled_s is not None
+                else f"{'converged' if converged else 'NOT converged'} in {took:.2f} s"
             )
+            print(f"  {verdict}; final error {errors}", flush=True)
             exit_code = exit_code or (0 if converged else 1)
         tool_now = client.current_tool_pose()
         print(f"  tool now: {_pose_line(tool_now)}")

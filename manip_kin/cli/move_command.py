@@ -189,6 +189,7 @@ def _move(args: argparse.Namespace, client) -> int:
 
 def _await(args, client, stamp: str, start: float, payload: dict, summary: str) -> int:
     from manip_kin.pipeline import PipelineError
+    from manip_kin.pipeline.outcome import motion_timing
 
     try:
         generator = client.wait_line_done(stamp, args.timeout, _GENERATOR)
@@ -199,8 +200,22 @@ def _await(args, client, stamp: str, start: float, payload: dict, summary: str) 
     converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining, _CONTROLLER)
     elapsed = client.time_to_converge(generator.values["final_goal_stamp"], start, _CONTROLLER)
     errors = {key: _number(status, f"{key}_error") for key in ("joint", "position", "orientation")}
-    payload.update(converged=converged, time=elapsed, final_error=errors, state=status.message if status else None)
-    verdict = f"converged in {elapsed:.2f} s" if converged else f"NOT converged after {elapsed:.2f} s"
+    timing = motion_timing(stamp, status.values if status else {}, generator.values)
+    payload.update(
+        converged=converged,
+        time=elapsed,
+        motion_time=timing.motion_s,
+        settle_time=timing.settled_s if converged else None,
+        settle_tolerance=timing.tolerance,
+        final_error=errors,
+        state=status.message if status else None,
+    )
+    if converged and timing.settled_s is not None:
+        verdict = f"converged ({timing.text('move')})"
+    elif converged:  # a controller that does not report when it settled
+        verdict = f"converged in {elapsed:.2f} s"
+    else:
+        verdict = f"NOT converged after {elapsed:.2f} s"
     if errors["joint"] is None:
         detail = "errors unknown (no controller status for this move)"
     else:

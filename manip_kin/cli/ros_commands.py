@@ -132,7 +132,7 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
     try:
         from geometry_msgs.msg import PoseStamped
 
-        client.wait_subscribers(PoseStamped, topic, args.timeout)  # "nobody listens" first
+        client.wait_subscribers(PoseStamped, topic, args.timeout, latched=True)  # "nobody listens" first
         statuses = [client.wait_status(node, args.timeout) for node in ready_nodes]
         client.base_frame = args.frame or statuses[-1].values.get("base_frame") or "base_link"
         if position_only:
@@ -164,9 +164,15 @@ def _deliver(args, client, send, topic: str, label: str, ready_nodes: tuple[str,
 
 
 def _await_convergence(
-    args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, suffix: str = ""
+    args, client, goal_stamp: str, start: float, payload: dict, label: str, timeout: float, generator=None
 ) -> int:
-    """Wait for the controller to say how ``goal_stamp`` ended; report; its exit code."""
+    """Wait for the controller to say how ``goal_stamp`` ended; report; its exit code.
+
+    ``generator``: the generator's status of the line that ends with ``goal_stamp`` (the
+    times are then measured from the line's start, else from the goal's stamp).
+    """
+    from manip_kin.pipeline.outcome import motion_timing
+
     converged, status = client.wait_converged(goal_stamp, timeout)
     elapsed = client.time_to_converge(goal_stamp, start)
     outcome = client.outcome(status, goal_stamp)
@@ -174,21 +180,31 @@ def _await_convergence(
         print(f"manip_kin {args.command}: error: goal rejected: {outcome.reason}", file=sys.stderr)
         return 2
     errors = _errors(status)
+    timing = motion_timing(
+        payload["stamp"], status.values if status else {}, generator.values if generator is not None else None
+    )
     payload.update(
         converged=converged,
         outcome=outcome.word or "timeout",
         reason=outcome.reason,
         time=elapsed,
+        motion_time=timing.motion_s,
+        settle_time=timing.settled_s if converged else None,
+        settle_tolerance=timing.tolerance,
         final_error=errors,
         state=status.message if status else None,
     )
-    if converged:
+    if converged and timing.settled_s is not None:
+        verdict = f"converged ({timing.text(label)})"
+    elif converged:  # a controller that does not report when it settled
         verdict = f"converged in {elapsed:.2f} s"
     elif outcome.word:
         verdict = f"{outcome.word} after {elapsed:.2f} s ({outcome.reason})"
     else:
         verdict = f"NOT converged after {elapsed:.2f} s (state {payload['state']})"
-    _report(args, payload, f"{label} {verdict}{suffix}: {_format_errors(errors)}")
+    if not converged and timing.motion_s is not None:
+        verdict += f" ({label} ended after {timing.motion_s:.2f} s)"
+    _report(args, payload, f"{label} {verdict}: {_format_errors(errors)}")
     return outcome.exit_code
 
 
@@ -270,5 +286,5 @@ def _run_line(args: argparse.Namespace, client) -> int:
         payload,
         "line",
         remaining,
-        suffix=f" (line {payload['line_duration']:.2f} s)",
+        generator=generator,
     )

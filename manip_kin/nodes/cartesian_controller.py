@@ -512,7 +512,7 @@ class CartesianControllerNode(LoopingNode):
             self.controller.config.respect_velocity_limits,
         )
         self.joint_output = output
-        self.supervisor.joint_step_done(output, fresh)
+        self.supervisor.joint_step_done(output, fresh, now_ns)
         return output.qdot
 
     def _publish_diagnostics(self, now_ns: int) -> None:
@@ -525,6 +525,8 @@ class CartesianControllerNode(LoopingNode):
             values = self._pose_values((supervisor.active or held_off) and self.output is not None)
         values += [
             ("goal_kind", supervisor.goal_kind or ""),
+            # When the goal was first within the tolerances (ROS clock): what --wait calls "settled".
+            ("converged_stamp", self.stamp_key_of(supervisor.converged_ns) if supervisor.converged_ns else ""),
             ("task", self.controller.task.name),
             ("position_tolerance", f"{self.position_tolerance:g}"),
             ("orientation_tolerance", f"{self.orientation_tolerance:g}"),

@@ -49,7 +49,14 @@ EVENT_QUEUE_DEPTH = 100
 
 PARAMETERS = (
     ParamSpec("address", "str", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every interface)"),
-    ParamSpec("port", "int", 8765, "TCP port of the WebSocket server (0: any free port, logged)", minimum=0),
+    ParamSpec(
+        "port",
+        "int",
+        8765,
+        "TCP port of the WebSocket server (0: any free port, logged)",
+        minimum=0,
+        maximum=65535,
+    ),
     ParamSpec(
         "rate_hz",
         "float",
@@ -57,7 +64,8 @@ PARAMETERS = (
         "highest rate of /tf and of each stream (joint_states, ee_pose, tool_pose, joint_velocity_commands) "
         "sent to clients",
         "Hz",
-        positive=True,
+        minimum=0.1,
+        maximum=1e3,  # no viewer draws faster; a tiny rate (1e-300) is refused, not an infinite period
     ),
     ParamSpec("frame_prefix", "str", "", "prefix of the synthesised TF frame ids (as robot_state's frame_prefix)"),
     ParamSpec(
@@ -66,6 +74,7 @@ PARAMETERS = (
         256,
         "messages queued per client; a client that reads slower loses its oldest (about 1 s at the default rates)",
         minimum=1,
+        maximum=100_000,  # a bounded queue: at most this many messages held per slow client
     ),
 )
 

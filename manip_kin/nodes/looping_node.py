@@ -16,6 +16,7 @@ from collections.abc import Callable
 from rclpy.node import Node
 
 from manip_kin.errors import OperationError
+from manip_kin.nodes.messages import ns_to_stamp, stamp_key
 from manip_kin.nodes.polling import LoopWaiter, PolledSubscription, fast_path_problem
 from manip_kin.nodes.rate_loop import RateLoop, stats_key_values
 from manip_kin.nodes.throttled_log import ThrottledLog, safe_log
@@ -190,6 +191,11 @@ class LoopingNode(Node):
     def ros_time_ns(self) -> int:
         """Now on the ROS clock (what stamps carry) [ns]."""
         return time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
+
+    def stamp_key_of(self, monotonic_ns: int) -> str:
+        """The :func:`~manip_kin.nodes.messages.stamp_key` of a loop time (``time.monotonic_ns()``)
+        moved to the ROS clock: how a node reports when something happened in its loop."""
+        return stamp_key(ns_to_stamp(monotonic_ns + self.ros_time_ns() - time.monotonic_ns()))
 
     @property
     def status_name(self) -> str:

@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter
 
 from manip_kin.errors import InvalidArgumentError
 
-KINDS = ("float", "int", "bool", "str", "float_list")
+KINDS = ("float", "int", "bool", "str", "float_list", "str_list")
 
 #: Longest string parameter [characters]: a path (PATH_MAX) or a link name fits.
 MAX_TEXT_LENGTH = 4096
@@ -61,13 +61,18 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _is_text_list(value) -> bool:
+    """A list or tuple of strings (a string alone is not a list of them)."""
+    return isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One node parameter.
 
     Attributes:
         name: parameter name.
-        kind: ``float``, ``int``, ``bool``, ``str`` or ``float_list``.
+        kind: ``float``, ``int``, ``bool``, ``str``, ``float_list`` or ``str_list``.
         default: default value (None: no default, e.g. "the robot's start configuration").
         description: what it does, one sentence.
         unit: unit text such as ``Hz``, ``s``, ``1/s``, ``m`` ("" when none).
@@ -79,7 +84,7 @@ class ParamSpec:
         zero_is_off: 0 is valid too and turns the feature off; other values must be within
             ``minimum``..``maximum`` (a rate: 0 = off, a tiny one such as 1e-300 Hz is refused).
         choices: valid values for strings, or empty.
-        default_text: how to show a None default in ``--help``.
+        default_text: how to show a None default (or a long list default) in ``--help``.
         tunable: settable on the running node (see :class:`LiveParameters`); otherwise
             structural and read-only.
 
@@ -135,7 +140,7 @@ class ParamSpec:
 
     def help_line(self) -> str:
         """One line for ``--help``: name, default, unit, valid values, description."""
-        if self.default is None:
+        if self.default is None or self.default_text:
             default = self.default_text or "(none)"
         elif isinstance(self.default, str):
             default = repr(self.default)
@@ -177,6 +182,12 @@ class ParamSpec:
             for number in result:
                 self._checked(number, value)
             return result
+        if self.kind == "str_list" and _is_text_list(value):
+            if len(value) > MAX_LIST_ITEMS:
+                raise self._error(value, f"at most {MAX_LIST_ITEMS} strings")
+            if any(len(text) > MAX_TEXT_LENGTH for text in value):
+                raise self._error(value, f"strings of at most {MAX_TEXT_LENGTH} characters")
+            return [str(text) for text in value]
         if self.kind not in KINDS:
             raise InvalidArgumentError(f"parameter {self.name}: unknown kind {self.kind!r}")
         kind = "text" if isinstance(value, str) else type(value).__name__
@@ -220,6 +231,7 @@ class ParamSpec:
             "bool": "true or false",
             "str": "a string",
             "float_list": "a list of numbers such as [0.0, 1.5]",
+            "str_list": "a list of strings such as [joint_states, /tf]",
         }[self.kind]
 
 

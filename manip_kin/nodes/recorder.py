@@ -39,7 +39,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from manip_kin.nodes.polling import RawSubscription, fast_path_problem
-from manip_kin.nodes.recorder_config import USAGE, read_config
+from manip_kin.nodes.recorder_config import NODE_NAME, USAGE, read_config
 from manip_kin.nodes.runner import run_node
 from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
 from manip_kin.recording.errors import RecordingError
@@ -103,7 +103,7 @@ class RecorderNode(Node):
     """The ``recorder`` node: see the module docstring and ``recorder --help``."""
 
     def __init__(self) -> None:
-        super().__init__("recorder")
+        super().__init__(NODE_NAME)
         config = read_config(self)
         topics = config.topics
         self._all_topics = config.all_topics

@@ -392,6 +392,8 @@ class TrajectoryGeneratorNode(LoopingNode):
             ("detail", supervisor.detail),
             ("target_stamp", supervisor.target_stamp),
             ("final_goal_stamp", supervisor.final_goal_stamp),
+            # When the motion's first sample went out (ROS clock); its last one is final_goal_stamp.
+            ("started_stamp", self.stamp_key_of(supervisor.started_ns) if supervisor.started_ns else ""),
             ("progress", f"{supervisor.progress:.4f}"),
             ("duration", f"{motion.duration:.4f}" if motion is not None else ""),
             ("length", f"{motion.length:.6f}" if isinstance(motion, LineTrajectory) else ""),

@@ -14,6 +14,7 @@ sets the environment before rclpy loads).
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -24,11 +25,15 @@ from manip_kin.errors import InvalidArgumentError
 from manip_kin.pipeline.domain import ensure_ros_isolation, use_prompt_acknowledgements
 from manip_kin.pipeline.errors import PipelineError
 from manip_kin.pipeline.outcome import GoalOutcome, goal_outcome, taken
+from manip_kin.pipeline.recorders import ASK_TIMEOUT_S, recorder_nodes, recorders_without, records_a_list
 
 #: Seconds without its node reporting a goal or line target of ours after which it is sent again.
 GOAL_RESEND_AFTER_S = 1.0
 #: Times a goal or line target is sent again at most.
 GOAL_RESENDS = 3
+#: Seconds a one-shot message waits for a recorder in the graph to subscribe to its topic: a few
+#: of the recorder's discovery periods (0.5 s), for a loaded machine.
+RECORDER_JOIN_S = 3.0
 
 
 @dataclass
@@ -256,28 +261,36 @@ class PipelineClient:
 
     # --- publishing ------------------------------------------------------------------------------
 
-    def publisher(self, msg_type, topic: str):
-        """A reliable depth-10 publisher on ``topic`` (relative names resolve in the namespace; created once)."""
-        key = f"{topic}:{msg_type.__name__}"
+    def publisher(self, msg_type, topic: str, latched: bool = False):
+        """A reliable publisher on ``topic`` (relative names resolve in the namespace; created once).
+
+        ``latched``: transient local, depth 1, for a one-shot message (a goal, a line target):
+        a recorder that subscribes after it went out still gets it. Otherwise volatile, depth 10
+        (streams).
+        """
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        key = f"{topic}:{msg_type.__name__}:{'latched' if latched else 'volatile'}"
         if key not in self._publishers:
-            self._publishers[key] = self.node.create_publisher(msg_type, topic, 10)
+            qos = QoSProfile(
+                depth=1 if latched else 10,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            )
+            self._publishers[key] = self.node.create_publisher(msg_type, topic, qos)
         return self._publishers[key]
 
-    def wait_subscribers(self, msg_type, topic: str, timeout: float = 10.0, subscribers: int = 1):
-        """The publisher on ``topic`` once every known subscription (at least ``subscribers``) matched it.
+    def wait_subscribers(
+        self, msg_type, topic: str, timeout: float = 10.0, subscribers: int = 1, latched: bool = False
+    ):
+        """The publisher on ``topic`` (see :meth:`publisher`) once every known subscription (at
+        least ``subscribers``) matched it.
 
         Raises:
             PipelineError: no subscriber within ``timeout``.
         """
-        publisher = self.publisher(msg_type, topic)
-
-        def all_matched() -> bool:
-            # Every subscription the graph knows must be matched, not just the first one:
-            # with a recorder running, it may match before the controller does.
-            known = len(self.node.get_subscriptions_info_by_topic(publisher.topic_name))
-            return publisher.get_subscription_count() >= max(subscribers, known)
-
-        matched = self.spin_until(all_matched, timeout)
+        publisher = self.publisher(msg_type, topic, latched)
+        matched = self.spin_until(lambda: self._all_matched(publisher, subscribers), timeout)
         if not matched:
             raise PipelineError(
                 f"no subscriber on {publisher.topic_name} after {timeout:g} s "
@@ -285,8 +298,21 @@ class PipelineClient:
             )
         return publisher
 
+    def _all_matched(self, publisher, subscribers: int = 1) -> bool:
+        # Every subscription the graph knows must be matched, not just the first one:
+        # with a recorder running, it may match before the controller does.
+        known = len(self.node.get_subscriptions_info_by_topic(publisher.topic_name))
+        return publisher.get_subscription_count() >= max(subscribers, known)
+
     def publish_delivered(self, topic: str, msg, timeout: float = 10.0, subscribers: int = 1) -> int:
-        """Publish ``msg`` once a subscriber is matched, and wait until they acknowledged it.
+        """Publish ``msg`` (latched, see :meth:`publisher`) once every known subscriber is
+        matched, and wait until every reader has acknowledged it, recorders included.
+
+        A recorder of all topics (``recorder -p all_topics:=true``, ``ros2 bag record -a``)
+        subscribes only once it discovers this client's publisher, often after the message
+        went out: it gets the message from the latched publisher, so this waits, at most
+        :data:`RECORDER_JOIN_S` (and ``timeout``), for each recorder in the graph that may
+        record this topic to subscribe and acknowledge (:mod:`manip_kin.pipeline.recorders`).
 
         Returns:
             The number of matched subscriptions.
@@ -294,23 +320,49 @@ class PipelineClient:
         Raises:
             PipelineError: no subscriber within ``timeout`` or no acknowledgement.
         """
-        from rclpy.duration import Duration
-
-        publisher = self.wait_subscribers(type(msg), topic, timeout, subscribers)
+        publisher = self.wait_subscribers(type(msg), topic, timeout, subscribers, latched=True)
         # Discovery is two-sided: give the subscriber's side a moment to match our writer too,
         # or a reliable sample can be sent before the reader accepts it.
         self.spin_for(0.05)
         publisher.publish(msg)
+        deadline = time.monotonic() + timeout
+        self._wait_acknowledged(publisher, deadline, timeout)
+        join_deadline = min(deadline, time.monotonic() + RECORDER_JOIN_S)
+        recorders = recorders_without(self.node, publisher.topic_name, self._possible_recorders())
+        while recorders and time.monotonic() < join_deadline:
+            self._executor.spin_once(timeout_sec=0.02)
+            recorders = recorders_without(self.node, publisher.topic_name, recorders)
+        if recorders:
+            names = ", ".join(f"{ns.rstrip('/')}/{name}" for name, ns in sorted(recorders))
+            print(
+                f"warning: {names} did not subscribe to {publisher.topic_name} within {RECORDER_JOIN_S:g} s: "
+                "its recording may lack this message",
+                file=sys.stderr,
+            )
+        self.spin_until(lambda: self._all_matched(publisher), max(join_deadline - time.monotonic(), 0.0))
+        self._wait_acknowledged(publisher, deadline, timeout)
+        return publisher.get_subscription_count()
+
+    def _possible_recorders(self) -> set[tuple[str, str]]:
+        """The recorders of the graph that may record a topic they have not subscribed yet."""
+        return {
+            node
+            for node in recorder_nodes(self.node)
+            if not records_a_list(self.node, *node, lambda future: self.spin_until(future.done, ASK_TIMEOUT_S))
+        }
+
+    def _wait_acknowledged(self, publisher, deadline: float, timeout: float) -> None:
+        """Spin until every matched reader acknowledged what ``publisher`` sent."""
+        from rclpy.duration import Duration
+
         # Fast DDS acknowledges at the writer's next heartbeat (20 ms with the client profile of
         # use_prompt_acknowledgements, 3 s where a caller's own profile keeps the default): keep
         # spinning meanwhile, or the statuses of that time (a goal reached before its
         # acknowledgement) would be taken in late, with late arrival times.
-        deadline = time.monotonic() + timeout
         while not publisher.wait_for_all_acked(Duration(seconds=0)):
             if time.monotonic() > deadline:
                 raise PipelineError(f"message on {publisher.topic_name} was not acknowledged within {timeout:g} s")
             self._executor.spin_once(timeout_sec=0.01)
-        return publisher.get_subscription_count()
 
     def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
         """A ``PoseStamped`` of a 4x4 pose stamped now (the stamp identifies it in /diagnostics)."""
@@ -518,7 +570,7 @@ class PipelineClient:
             superseded = False
         if superseded:
             return  # the node has moved on to a newer one: ours is not wanted any more
-        self.publisher(type(sent.msg), topic).publish(sent.msg)
+        self.publisher(type(sent.msg), topic, latched=True).publish(sent.msg)
         sent.sent_at = time.monotonic()
         sent.resends += 1
 

@@ -46,3 +46,57 @@ def goal_outcome(values: dict, state: str, goal_stamp: str) -> GoalOutcome:
 def taken(values: dict, goal_stamp: str) -> bool:
     """True once the controller reports ``goal_stamp`` as its goal, or as rejected."""
     return goal_stamp in (values.get("goal_stamp"), values.get("rejected_stamp"))
+
+
+def seconds_between(earlier: str, later: str) -> float | None:
+    """Seconds from the stamp key ``earlier`` to ``later`` (``sec.nanosec`` texts of the ROS
+    clock, as the nodes report them); None when either is missing or not a stamp key."""
+    from manip_kin.nodes.messages import stamp_key_to_ns
+
+    try:
+        return (stamp_key_to_ns(later) - stamp_key_to_ns(earlier)) * 1e-9
+    except ValueError:
+        return None
+
+
+@dataclass(frozen=True)
+class MotionTiming:
+    """When a motion ended and when the controller settled on its goal, from their reports.
+
+    Attributes:
+        motion_s: from the motion's start to its last sample [s] (the generator's
+            ``started_stamp`` to ``final_goal_stamp``); None for a single goal, or unknown.
+        settled_s: from the start to the first cycle within the controller's tolerances [s]
+            (its ``converged_stamp``); None if it has not settled (or is not known).
+        tolerance: the tolerances it settled within, in words (``0.0001 m / 0.001 rad``).
+    """
+
+    motion_s: float | None
+    settled_s: float | None
+    tolerance: str
+
+    def text(self, motion: str = "motion") -> str:
+        """``line ended after 2.50 s; settled within 0.0001 m / 0.001 rad after 3.10 s`` (the
+        parts known; ``motion`` names the motion)."""
+        parts = [] if self.motion_s is None else [f"{motion} ended after {self.motion_s:.2f} s"]
+        if self.settled_s is not None:
+            parts.append(f"settled within {self.tolerance} after {self.settled_s:.2f} s")
+        return "; ".join(parts)
+
+
+def motion_timing(start_stamp: str, controller: dict, generator: dict | None = None) -> MotionTiming:
+    """The timing of a goal sent at ``start_stamp`` (``generator`` None) or of a generator's
+    motion (its status ``values``: measured from its ``started_stamp``), read from the
+    controller status ``values`` that reported the goal converged."""
+    start = generator.get("started_stamp", "") if generator is not None else start_stamp
+    motion = seconds_between(start, generator.get("final_goal_stamp", "")) if generator is not None else None
+    settled = seconds_between(start, controller.get("converged_stamp", ""))
+    if controller.get("goal_kind") == "joint":
+        tolerance = f"{controller.get('joint_tolerance', '?')} rad or m per joint"
+    elif controller.get("task") == "position":
+        tolerance = f"{controller.get('position_tolerance', '?')} m"
+    else:
+        tolerance = (
+            f"{controller.get('position_tolerance', '?')} m / {controller.get('orientation_tolerance', '?')} rad"
+        )
+    return MotionTiming(motion, settled, tolerance)
