@@ -376,3 +376,14 @@ def test_an_all_topics_recording_has_the_one_shot_messages_of_a_client(ros, proc
     assert recorder.returncode == 0, stderr
     recorded = read_with_rosbags(output)["/line_target"]
     assert [f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}" for _, m in recorded] == [stamp]
+
+
+def test_recorders_are_named_recorder_or_end_in_recorder():
+    from manip_kin.pipeline.recorders import recorder_nodes
+
+    class Graph:
+        def get_node_names_and_namespaces(self):
+            names = ["recorder", "rosbag2_recorder", "recorder_test_1", "recorders", "cartesian_controller"]
+            return [(name, "/") for name in names] + [("recorder", "/left")]
+
+    assert recorder_nodes(Graph()) == {("recorder", "/"), ("rosbag2_recorder", "/"), ("recorder", "/left")}

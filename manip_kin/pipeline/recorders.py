@@ -17,7 +17,11 @@ ASK_TIMEOUT_S = 0.5
 
 def recorder_nodes(node) -> set[tuple[str, str]]:
     """``(name, namespace)`` of every recorder node ``node`` sees in the graph."""
-    return {(name, namespace) for name, namespace in node.get_node_names_and_namespaces() if "recorder" in name}
+    return {
+        (name, namespace)
+        for name, namespace in node.get_node_names_and_namespaces()
+        if name == "recorder" or name.endswith("_recorder")
+    }
 
 
 def recorders_without(node, topic: str, recorders: Iterable[tuple[str, str]]) -> set[tuple[str, str]]:
