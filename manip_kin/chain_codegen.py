@@ -99,7 +99,9 @@ def _times_constant(emit: _Emitter, state: list[list[object]], fixed: np.ndarray
     return out
 
 
-def _joint_step(emit: _Emitter, state: list[list[object]], fixed: np.ndarray, revolute: bool, i: int) -> list[list[object]]:
+def _joint_step(
+    emit: _Emitter, state: list[list[object]], fixed: np.ndarray, revolute: bool, i: int
+) -> list[list[object]]:
     """``state · F_i · (Rz(q_i) or Tz(q_i))``: the 3x4 affine state on to joint i's moving frame."""
     state = _times_constant(emit, state, fixed)
     if revolute:

@@ -29,12 +29,7 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
     frames = frame_poses(model, q)
     robot = [(g.link, g.shape.coal_shape, frames[g.frame] @ g.offset, g.frame) for g in collision.geometries]
     checked = set(collision.pairs.checked)
-    pairs = [
-        (a, b)
-        for i, a in enumerate(robot)
-        for b in robot[i + 1 :]
-        if tuple(sorted((a[0], b[0]))) in checked
-    ]
+    pairs = [(a, b) for i, a in enumerate(robot) for b in robot[i + 1 :] if tuple(sorted((a[0], b[0]))) in checked]
     pairs += [(a, b) for b in obstacles for a in robot if a[3] > 0]  # shapes on the base never meet obstacles
     found = []
     for (name_a, shape_a, pose_a, _), (name_b, shape_b, pose_b, _) in pairs:
@@ -53,10 +48,10 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
 
 @given(
     start=st.lists(st.floats(-0.6, 0.6), min_size=7, max_size=7),
-    steps=st.lists(
-        st.tuples(st.integers(0, 6), st.floats(-0.3, 0.3), st.integers(1, 6)), min_size=4, max_size=10
+    steps=st.lists(st.tuples(st.integers(0, 6), st.floats(-0.3, 0.3), st.integers(1, 6)), min_size=4, max_size=10),
+    centres=st.lists(
+        st.tuples(st.floats(-0.2, 0.7), st.floats(-0.5, 0.5), st.floats(0.0, 0.9)), min_size=1, max_size=3
     ),
-    centres=st.lists(st.tuples(st.floats(-0.2, 0.7), st.floats(-0.5, 0.5), st.floats(0.0, 0.9)), min_size=1, max_size=3),
     radius=st.floats(0.03, 0.15),
 )
 @settings(max_examples=25, deadline=None)
