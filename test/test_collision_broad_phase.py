@@ -11,7 +11,6 @@ answer, at the same distance.
 import coal
 import numpy as np
 import pytest
-from collision_robots import PANDA_READY
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -47,8 +46,8 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
 
 
 @given(
-    start=st.lists(st.floats(-0.6, 0.6), min_size=7, max_size=7),
-    steps=st.lists(st.tuples(st.integers(0, 6), st.floats(-0.3, 0.3), st.integers(1, 6)), min_size=4, max_size=10),
+    start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7),
+    steps=st.lists(st.tuples(st.integers(0, 6), st.floats(-1.0, 1.0), st.integers(1, 8)), min_size=4, max_size=10),
     centres=st.lists(
         st.tuples(st.floats(-0.2, 0.7), st.floats(-0.5, 0.5), st.floats(0.0, 0.9)), min_size=1, max_size=3
     ),
@@ -67,8 +66,9 @@ def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, 
         obstacles.append((f"obstacle:cell/{k}", shape, pose, 0))
     checker = CollisionChecker(model, collision)
     checker.update_scene(scene)
-    q = np.clip(PANDA_READY + np.array(start), model.lower, model.upper)
-    # A walk: one joint at a time, in one to six equal steps (small steps as in a control
+    # Anywhere in the joint ranges: folded arms bring link pairs near each other too.
+    q = model.lower + np.array(start) * (model.upper - model.lower)
+    # A walk: one joint at a time, in one to eight equal steps (small steps as in a control
     # loop carry the lower bounds; the large ones test the bound's size).
     configurations = [q]
     for joint, move, count in steps:

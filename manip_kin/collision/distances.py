@@ -190,8 +190,10 @@ class CollisionChecker:
         self._pair_differences[rows, second] -= 1.0
         self._centres = np.zeros((len(self._shapes), 3))
         self._centres[count:] = self._obstacle_centres
-        # |Δq| @ _reach_pairs bounds how much each pair's distance can fall (see _near_pairs).
-        self._reach_pairs = joint_reach(self.model, cm.frames, cm.offsets, cm.centres, cm.radii) @ self._pair_sums
+        # |Δq| @ _reach_pairs bounds how much each pair's distance can fall (see _near_pairs). A
+        # joint that moves both shapes of a pair moves them as one body: it leaves their distance.
+        reach = joint_reach(self.model, cm.frames, cm.offsets, cm.centres, cm.radii) @ self._pair_sums
+        self._reach_pairs = reach * (1.0 - self._moves_first * self._moves_second).T
         self._functors = [coal.ComputeDistance(self._shapes[a], self._shapes[b]) for a, b in pairs.tolist()]
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
