@@ -36,6 +36,11 @@ from manip_kin.model import RobotModel
 from manip_kin.scene import Scene
 
 
+#: Pairs this far beyond the cutoff [m] are checked every cycle too, so that the others can be
+#: left out for the cycles it takes the joints to spend it (see :meth:`CollisionChecker._near_pairs`).
+BAND = 0.005
+
+
 def obstacle_name(key: tuple[str, int]) -> str:
     """How an obstacle appears in a pair: ``obstacle:<ns>/<id>``."""
     return f"obstacle:{key[0]}/{key[1]}"
@@ -197,7 +202,16 @@ class CollisionChecker:
         self._functors = [coal.ComputeDistance(self._shapes[a], self._shapes[b]) for a, b in pairs.tolist()]
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
-        self._previous: np.ndarray | None = None
+        # The configuration of the last call, and per joint the sum of |Δq| since the last
+        # full pass (the lower bounds' own configuration).
+        self._previous: list[float] | None = None
+        self._travel = [0.0] * self.model.dof
+        # The pairs of the last full pass within its cutoff + BAND, that cutoff, and what is left
+        # of BAND after the joints' motion since: the most any pair can have come nearer.
+        self._near_rows: list[int] = []
+        self._near_cutoff: float | None = None
+        self._budget = 0.0
+        self._reach_most = self._reach_pairs.max(axis=1, initial=0.0).tolist()
 
     @property
     def obstacle_count(self) -> int:
@@ -221,17 +235,28 @@ class CollisionChecker:
         configurations), so a pair's distance fell by at most its two shapes' bounds: the lower
         bound carried from the last call less those stays one.
         """
+        q_values = q.tolist()
+        if self._previous is not None:
+            step = [abs(a - b) for a, b in zip(q_values, self._previous)]
+            self._travel = [t + d for t, d in zip(self._travel, step)]
+            self._budget -= sum(d * r for d, r in zip(step, self._reach_most))
+        self._previous = q_values
         placed = self._place(q)
         lower = self._lower
-        if self._previous is not None:
-            lower -= np.abs(q - self._previous) @ self._reach_pairs
-        self._previous = q.copy()
-        centres = self._centres
-        centres[: self._robot_count] = placed[:, :, 4]
-        gaps = self._pair_differences @ centres
-        # The gap between bounding spheres is a lower bound too: keep the larger.
-        np.maximum(lower, np.sqrt(np.einsum("ij,ij->i", gaps, gaps)) - self._radius_sums, out=lower)
-        rows = np.flatnonzero(lower < cutoff).tolist()
+        if cutoff == self._near_cutoff and self._budget > 0.0:
+            # Every pair left out at the last full pass was BAND beyond the cutoff, and none can
+            # have come nearer by more than the budget spent since: only the near ones again.
+            rows = self._near_rows
+        else:
+            lower -= np.array(self._travel) @ self._reach_pairs
+            self._travel = [0.0] * len(q_values)
+            centres = self._centres
+            centres[: self._robot_count] = placed[:, :, 4]
+            gaps = self._pair_differences @ centres
+            # The gap between bounding spheres is a lower bound too: keep the larger.
+            np.maximum(lower, np.sqrt(np.einsum("ij,ij->i", gaps, gaps)) - self._radius_sums, out=lower)
+            rows = self._near_rows = np.flatnonzero(lower < cutoff + BAND).tolist()
+            self._near_cutoff, self._budget = cutoff, BAND
         if not rows:
             return []
         transforms, count = self._transforms, self._robot_count
