@@ -35,7 +35,6 @@ from manip_kin.errors import ModelFileError
 from manip_kin.model import RobotModel
 from manip_kin.scene import Scene
 
-
 #: Pairs this far beyond the cutoff [m] are checked every cycle too, so that the others can be
 #: left out for the cycles it takes the joints to spend it (see :meth:`CollisionChecker._near_pairs`).
 BAND = 0.005
