@@ -4,9 +4,13 @@
 coal shapes, rebuilt only when ``scene.version`` moves). Each cycle
 (:meth:`CollisionChecker.evaluate`):
 
-1. forward kinematics and the pose of every shape (one batched product);
-2. a broad phase on bounding spheres drops the pairs that cannot be within the influence
-   distance ``d_i`` (the sphere gap is a lower bound on the distance);
+1. every frame and joint twist (one generated function) and the pose of every shape (one
+   batched product);
+2. a broad phase drops the pairs that cannot be within the influence distance ``d_i``: each
+   pair keeps a lower bound on its distance, the larger of the gap between bounding spheres
+   and the distance last computed less a joint-rate bound on how far its shapes moved since
+   (:func:`~manip_kin.collision.geometry.joint_reach`); while that bound has not spent
+   :data:`BAND`, only the pairs within ``d_i + BAND`` at the last full pass are looked at;
 3. coal computes the distance ``d`` and witness points ``p_a``, ``p_b`` of the others
    (convex shapes: about 1.3 µs a pair; negative ``d`` is the penetration depth);
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
