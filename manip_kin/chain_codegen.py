@@ -99,6 +99,25 @@ def _times_constant(emit: _Emitter, state: list[list[object]], fixed: np.ndarray
     return out
 
 
+def _joint_step(
+    emit: _Emitter, state: list[list[object]], fixed: np.ndarray, revolute: bool, i: int
+) -> list[list[object]]:
+    """``state · F_i · (Rz(q_i) or Tz(q_i))``: the 3x4 affine state on to joint i's moving frame."""
+    state = _times_constant(emit, state, fixed)
+    if revolute:
+        c, s = f"c{i}", f"s{i}"
+        emit.lines.append(f"{c} = cos(q{i}); {s} = sin(q{i})")
+        for r in range(3):
+            col0, col1 = state[r][0], state[r][1]
+            # M · Rz(q): column 0 = c·m0 + s·m1, column 1 = c·m1 - s·m0
+            state[r][0] = emit.combine([(col0, c), (col1, s)])
+            state[r][1] = emit.combine([(col1, c), (col0, s, -1.0)])
+    else:
+        for r in range(3):
+            state[r][3] = emit.combine([(state[r][3], 1.0), (state[r][2], f"q{i}")])
+    return state
+
+
 def generate_source(
     fixed: np.ndarray, revolute: Sequence[bool], tail: np.ndarray, count: int, with_jacobian: bool
 ) -> str:
@@ -116,18 +135,7 @@ def generate_source(
     state: list[list[object]] = [[1.0 if r == c else 0.0 for c in range(4)] for r in range(3)]
     axes, origins = [], []
     for i in range(count):
-        state = _times_constant(emit, state, fixed[i])
-        if revolute[i]:
-            c, s = f"c{i}", f"s{i}"
-            emit.lines.append(f"{c} = cos(q{i}); {s} = sin(q{i})")
-            for r in range(3):
-                col0, col1 = state[r][0], state[r][1]
-                # M · Rz(q): column 0 = c·m0 + s·m1, column 1 = c·m1 - s·m0
-                state[r][0] = emit.combine([(col0, c), (col1, s)])
-                state[r][1] = emit.combine([(col1, c), (col0, s, -1.0)])
-        else:
-            for r in range(3):
-                state[r][3] = emit.combine([(state[r][3], 1.0), (state[r][2], f"q{i}")])
+        state = _joint_step(emit, state, fixed[i], revolute[i], i)
         axes.append([state[r][2] for r in range(3)])
         origins.append([state[r][3] for r in range(3)])
     state = _times_constant(emit, state, tail)
@@ -181,4 +189,63 @@ def compile_chain(
         lambda: generate_source(fixed, revolute, tail, count, with_jacobian),
         "chain",
         namespace,
+    )
+
+
+def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_offsets: np.ndarray) -> str:
+    """Python source of ``frames(q)``: every model frame and every joint's spatial twist in one pass.
+
+    Returns a flat tuple: frames 0 (base, the identity) .. n as 4x4 row-major (16 values each),
+    then the (6, n) matrix, row-major, whose column j is joint j's unit twist in base
+    ``[ω; v]``: ``(z_j, o_j × z_j)`` for a revolute joint, ``(0, z_j)`` for a prismatic one,
+    with ``z_j`` its axis and ``o_j`` its origin. A point ``p`` moving with joint j has the
+    linear velocity ``v + ω × p`` per unit rate (the columns of its linear Jacobian).
+
+    Args:
+        fixed: ``F_i`` of :class:`manip_kin.model.ChainArrays`, shape (n, 4, 4).
+        revolute: joint types, True for revolute.
+        frame_offsets: from joint i's moving frame to model frame i, shape (n, 4, 4).
+    """
+    emit = _Emitter()
+    n = len(revolute)
+    state: list[list[object]] = [[1.0 if r == c else 0.0 for c in range(4)] for r in range(3)]
+    outputs: list[object] = [1.0 if r == c else 0.0 for r in range(4) for c in range(4)]
+    twists: list[list[object]] = [[0.0] * n for _ in range(6)]
+    bottom = [0.0, 0.0, 0.0, 1.0]
+    for i in range(n):
+        state = _joint_step(emit, state, fixed[i], revolute[i], i)
+        z, o = [state[r][2] for r in range(3)], [state[r][3] for r in range(3)]
+        if revolute[i]:
+            for r in range(3):
+                twists[r][i] = z[r]
+            # o × z
+            twists[3][i] = emit.combine([(o[1], z[2]), (o[2], z[1], -1.0)])
+            twists[4][i] = emit.combine([(o[2], z[0]), (o[0], z[2], -1.0)])
+            twists[5][i] = emit.combine([(o[0], z[1]), (o[1], z[0], -1.0)])
+        else:
+            for r in range(3):
+                twists[3 + r][i] = z[r]
+        frame = _times_constant(emit, state, frame_offsets[i])
+        outputs += [frame[r][c] for r in range(3) for c in range(4)] + bottom
+    outputs += [v for row in twists for v in row]
+    arguments = ", ".join(f"q{i}" for i in range(n)) + ("," if n == 1 else "")
+    body = [f"    {arguments} = q"] + [f"    {line}" for line in emit.lines]
+    body.append("    return (" + ", ".join(repr(v) if isinstance(v, float) else v for v in outputs) + ",)")
+    return "def frames(q):\n" + "\n".join(body) + "\n"
+
+
+def compile_frames(
+    fixed: np.ndarray, revolute: Sequence[bool], frame_offsets: np.ndarray
+) -> Callable[[Sequence[float]], tuple[float, ...]]:
+    """Compile :func:`generate_frames_source` into a function (through :mod:`manip_kin.kernel_cache`)."""
+    fixed = np.ascontiguousarray(fixed, dtype=float)
+    frame_offsets = np.ascontiguousarray(frame_offsets, dtype=float)
+    revolute = tuple(bool(flag) for flag in revolute)
+    key = (fixed.shape, fixed.tobytes(), revolute, frame_offsets.tobytes())
+    return kernel(
+        "frames",
+        key,
+        lambda: generate_frames_source(fixed, revolute, frame_offsets),
+        "frames",
+        {"cos": math.cos, "sin": math.sin},
     )

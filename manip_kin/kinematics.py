@@ -212,6 +212,19 @@ def _chain_of(model: RobotModel, frame_index: int, with_jacobian: bool, vectoriz
     return compile_chain(model.chain.fixed, revolute, tail, count, with_jacobian, vectorized=vectorized)
 
 
+def compiled_frames(model: RobotModel):
+    """The unrolled ``frames(q) -> tuple`` of every model frame and joint twist
+    (:func:`manip_kin.chain_codegen.generate_frames_source`), built once per model."""
+    return model.kernels.get(("frames",), _frames_of, model)
+
+
+def _frames_of(model: RobotModel):
+    from manip_kin.chain_codegen import compile_frames
+
+    chain = model.chain
+    return compile_frames(chain.fixed, [bool(flag) for flag in chain.revolute_mask], chain.frame_offsets)
+
+
 def pose_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> np.ndarray:
     """Pose of one frame in base, shape (4, 4): the fast path for control loops.
 

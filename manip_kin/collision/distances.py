@@ -4,9 +4,13 @@
 coal shapes, rebuilt only when ``scene.version`` moves). Each cycle
 (:meth:`CollisionChecker.evaluate`):
 
-1. forward kinematics and the pose of every shape (one batched product);
-2. a broad phase on bounding spheres drops the pairs that cannot be within the influence
-   distance ``d_i`` (the sphere gap is a lower bound on the distance);
+1. every frame and joint twist (one generated function) and the pose of every shape (one
+   batched product);
+2. a broad phase drops the pairs that cannot be within the influence distance ``d_i``: each
+   pair keeps a lower bound on its distance, the larger of the gap between bounding spheres
+   and the distance last computed less a joint-rate bound on how far its shapes moved since
+   (:func:`~manip_kin.collision.geometry.joint_reach`); while that bound has not spent
+   :data:`BAND`, only the pairs within ``d_i + BAND`` at the last full pass are looked at;
 3. coal computes the distance ``d`` and witness points ``p_a``, ``p_b`` of the others
    (convex shapes: about 1.3 µs a pair; negative ``d`` is the penetration depth);
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
@@ -30,30 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
-from manip_kin.collision.geometry import (
-    CollisionShape,
-    model_frames,
-    obstacle_shape,
-    sphere_centres,
-    sphere_gaps,
-    world_poses,
-)
+from manip_kin.collision.geometry import CollisionShape, frames_and_twists, joint_reach, obstacle_shape, sphere_centres
 from manip_kin.errors import ModelFileError
 from manip_kin.model import RobotModel
 from manip_kin.scene import Scene
 
-
-def _displacements(
-    previous_poses: np.ndarray, previous_centres: np.ndarray, poses: np.ndarray, centres: np.ndarray, radii: np.ndarray
-) -> np.ndarray:
-    """How far any point of each shape's bounding sphere moved between two poses, an upper bound, shape (G,) [m].
-
-    A point at ``c + v`` (|v| <= r) moves by at most ``|Δc| + |R₁v − R₀v|`` and
-    ``|R₁ − R₀|₂ = 2 sin(θ/2) = sqrt(3 − tr(R₀ᵀR₁))`` for the rotation angle θ between them.
-    """
-    trace = (previous_poses[:, :3, :3] * poses[:, :3, :3]).sum(axis=(1, 2))
-    shift = centres - previous_centres
-    return np.sqrt((shift * shift).sum(axis=1)) + radii * np.sqrt(np.maximum(3.0 - trace, 0.0))
+#: Pairs this far beyond the cutoff [m] are checked every cycle too, so that the others can be
+#: left out for the cycles it takes the joints to spend it (see :meth:`CollisionChecker._near_pairs`).
+BAND = 0.005
 
 
 def obstacle_name(key: tuple[str, int]) -> str:
@@ -130,10 +118,14 @@ class CollisionChecker:
         self.model = model
         self.collision_model = collision_model
         self.mesh_search_path = mesh_search_path
-        # From frame i to the moving frame of joint i (whose z is the joint axis), shape (n, 4, 4).
-        self._to_moving = np.linalg.inv(model.chain.frame_offsets)
         # Also builds the unrolled kinematics of every frame now, not in the first control cycle.
-        self._frames_now = model_frames(model, model.start_configuration())
+        self._twists = frames_and_twists(model, model.start_configuration())[1]
+        # Each shape's pose in its frame with its bounding-sphere centre as a fifth column:
+        # one product per cycle places both, shape (G, 4, 5).
+        centres = np.concatenate([collision_model.centres, np.ones((len(collision_model.centres), 1))], axis=1)
+        self._offsets_and_centres = np.concatenate(
+            [collision_model.offsets, (collision_model.offsets @ centres[:, :, None])], axis=2
+        )
         geometries = collision_model.geometries
         self._robot_count = len(geometries)
         self._robot_shapes = [g.shape.coal_shape for g in geometries]
@@ -185,23 +177,44 @@ class CollisionChecker:
         moving = np.flatnonzero(cm.frames > 0)
         grid = [(g, count + o) for o in range(len(obstacles)) for g in moving]
         pairs = np.concatenate([cm.self_pairs, np.array(grid, dtype=int).reshape(-1, 2)])
-        self._first, self._second = pairs[:, 0], pairs[:, 1]
-        self._first_list, self._second_list = self._first.tolist(), self._second.tolist()
-        self._radius_sums = radii[self._first] + radii[self._second]
+        first, second = pairs[:, 0], pairs[:, 1]
+        self._first_list, self._second_list = first.tolist(), second.tolist()
+        self._radius_sums = radii[first] + radii[second]
         self._labels = [f"{self._names[a]}-{self._names[b]}" for a, b in pairs.tolist()]
         # Which joints move each pair's shapes (frame i moves with joints 1..i; obstacles: none).
         frames = np.array(self._frames)
         joints = np.arange(self.model.dof)[None, :]
-        self._moves_first = (joints < frames[self._first][:, None]).astype(float)
-        self._moves_second = (joints < frames[self._second][:, None]).astype(float)
-        self._moved = np.zeros(len(self._shapes))  # obstacle entries stay 0
+        self._moves_first = (joints < frames[first][:, None]).astype(float)
+        self._moves_second = (joints < frames[second][:, None]).astype(float)
+        # Pair-by-shape matrices: ``moved @ _pair_sums`` adds each pair's two robot shapes'
+        # motions, ``_pair_differences @ centres`` subtracts its sphere centres.
+        rows = np.arange(len(pairs))
+        self._pair_sums = np.zeros((count, len(pairs)))
+        for column in (first, second):
+            robot = column < count
+            self._pair_sums[column[robot], rows[robot]] += 1.0
+        self._pair_differences = np.zeros((len(pairs), len(self._shapes)))
+        self._pair_differences[rows, first] = 1.0
+        self._pair_differences[rows, second] -= 1.0
         self._centres = np.zeros((len(self._shapes), 3))
         self._centres[count:] = self._obstacle_centres
-        self._moved = np.zeros(len(self._shapes))
+        # |Δq| @ _reach_pairs bounds how much each pair's distance can fall (see _near_pairs). A
+        # joint that moves both shapes of a pair moves them as one body: it leaves their distance.
+        reach = joint_reach(self.model, cm.frames, cm.offsets, cm.centres, cm.radii) @ self._pair_sums
+        self._reach_pairs = reach * (1.0 - self._moves_first * self._moves_second).T
         self._functors = [coal.ComputeDistance(self._shapes[a], self._shapes[b]) for a, b in pairs.tolist()]
-        # A lower bound on each pair's distance, valid for the shape poses of _previous.
+        # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
-        self._previous: tuple[np.ndarray, np.ndarray] | None = None
+        # The configuration of the last call, and per joint the sum of |Δq| since the last
+        # full pass (the lower bounds' own configuration).
+        self._previous: list[float] | None = None
+        self._travel = [0.0] * self.model.dof
+        # The pairs of the last full pass within its cutoff + BAND, that cutoff, and what is left
+        # of BAND after the joints' motion since: the most any pair can have come nearer.
+        self._near_rows: list[int] = []
+        self._near_cutoff: float | None = None
+        self._budget = 0.0
+        self._reach_most = self._reach_pairs.max(axis=1, initial=0.0).tolist()
 
     @property
     def obstacle_count(self) -> int:
@@ -210,51 +223,65 @@ class CollisionChecker:
 
     # --- distances -----------------------------------------------------------------------------
 
-    def _shape_poses(self, q: np.ndarray) -> np.ndarray:
-        frames = model_frames(self.model, q)
-        self._frames_now = frames
-        cm = self.collision_model
-        return world_poses(frames, cm.frames, cm.offsets)
+    def _place(self, q: np.ndarray) -> np.ndarray:
+        """The robot shapes' rotations, origins and bounding-sphere centres in base at ``q``:
+        ``[R | t | c]``, shape (G, 3, 5); keeps the joints' twists for the damper rows."""
+        frames, self._twists = frames_and_twists(self.model, q)
+        return np.matmul(frames[self.collision_model.frames, :3], self._offsets_and_centres)
 
     def _near_pairs(self, q: np.ndarray, cutoff: float) -> list[tuple[int, float, np.ndarray, np.ndarray, np.ndarray]]:
         """``(pair row, distance, point on first, point on second, normal)`` of the pairs nearer
-        than ``cutoff``; updates the lower bounds (see :meth:`pair_distances`)."""
-        poses = self._shape_poses(q)
-        robot_centres = sphere_centres(poses, self.collision_model.centres)
+        than ``cutoff``; updates the lower bounds (see :meth:`pair_distances`).
+
+        Since the last call each shape moved by at most ``Σ_j |Δq_j| · reach[j]``
+        (:func:`~manip_kin.collision.geometry.joint_reach`, whatever the path between the two
+        configurations), so a pair's distance fell by at most its two shapes' bounds: the lower
+        bound carried from the last call less those stays one.
+        """
+        q_values = q.tolist()
         if self._previous is not None:
-            moved = self._moved
-            moved[: self._robot_count] = _displacements(
-                self._previous[0], self._previous[1], poses, robot_centres, self.collision_model.radii
-            )
-            self._lower -= moved[self._first] + moved[self._second]
-        self._previous = (poses, robot_centres)
-        centres = self._centres
-        centres[: self._robot_count] = robot_centres
+            step = [abs(a - b) for a, b in zip(q_values, self._previous)]
+            self._travel = [t + d for t, d in zip(self._travel, step)]
+            self._budget -= sum(d * r for d, r in zip(step, self._reach_most))
+        self._previous = q_values
+        placed = self._place(q)
         lower = self._lower
-        np.maximum(lower, sphere_gaps(centres[self._first], centres[self._second], self._radius_sums), out=lower)
-        rows = np.flatnonzero(lower < cutoff).tolist()
+        if cutoff == self._near_cutoff and self._budget > 0.0:
+            # Every pair left out at the last full pass was BAND beyond the cutoff, and none can
+            # have come nearer by more than the budget spent since: only the near ones again.
+            rows = self._near_rows
+        else:
+            lower -= np.array(self._travel) @ self._reach_pairs
+            self._travel = [0.0] * len(q_values)
+            centres = self._centres
+            centres[: self._robot_count] = placed[:, :, 4]
+            gaps = self._pair_differences @ centres
+            # The gap between bounding spheres is a lower bound too: keep the larger.
+            np.maximum(lower, np.sqrt(np.einsum("ij,ij->i", gaps, gaps)) - self._radius_sums, out=lower)
+            rows = self._near_rows = np.flatnonzero(lower < cutoff + BAND).tolist()
+            self._near_cutoff, self._budget = cutoff, BAND
         if not rows:
             return []
         transforms, count = self._transforms, self._robot_count
-        placed = [False] * count
+        done = [False] * count
         first, second = self._first_list, self._second_list
         functors, request, result = self._functors, self._request, self._result
         found = []
         for row in rows:
             a, b = first[row], second[row]
-            if not placed[a]:
-                transforms[a].setTransform(poses[a, :3, :3], poses[a, :3, 3])
-                placed[a] = True
-            if b < count and not placed[b]:
-                transforms[b].setTransform(poses[b, :3, :3], poses[b, :3, 3])
-                placed[b] = True
+            if not done[a]:
+                transforms[a].setTransform(placed[a, :, :3], placed[a, :, 3])
+                done[a] = True
+            if b < count and not done[b]:
+                transforms[b].setTransform(placed[b, :, :3], placed[b, :, 3])
+                done[b] = True
             result.clear()
             distance = functors[row](transforms[a], transforms[b], request, result)
             lower[row] = distance
             if distance < cutoff:
                 # The witness points come back as copies; the normal is a view into the result.
                 found.append(
-                    (row, distance, result.getNearestPoint1(), result.getNearestPoint2(), np.array(result.normal))
+                    (row, distance, result.getNearestPoint1(), result.getNearestPoint2(), result.normal.tolist())
                 )
         return found
 
@@ -262,7 +289,12 @@ class CollisionChecker:
         row, distance, point_first, point_second, normal = found
         names = self._names
         return PairDistance(
-            names[self._first_list[row]], names[self._second_list[row]], distance, point_first, point_second, normal
+            names[self._first_list[row]],
+            names[self._second_list[row]],
+            distance,
+            point_first,
+            point_second,
+            np.array(normal),
         )
 
     def pair_distances(self, q: np.ndarray, cutoff: float = math.inf) -> list[PairDistance]:
@@ -270,7 +302,7 @@ class CollisionChecker:
 
         ``q``: joint positions, shape (n,), a float array. A pair is skipped when a lower bound
         on its distance is ``cutoff`` or more: the gap between bounding spheres, or the distance
-        last computed minus how far each shape has moved since (see :func:`_displacements`).
+        last computed minus how far each shape has moved since (see :meth:`_near_pairs`).
         Between nearby configurations (a control loop, a sampled path) most far pairs are
         therefore computed once and skipped afterwards.
         """
@@ -299,40 +331,28 @@ class CollisionChecker:
         if not found:
             return DamperRows((), np.zeros(0), np.zeros((0, self.model.dof)), np.zeros(0), None)
         rows = [item[0] for item in found]
-        distances = np.array([item[1] for item in found])
-        matrix = self._damper_matrix(
-            rows,
-            np.array([item[2] for item in found]),
-            np.array([item[3] for item in found]),
-            np.array([item[4] for item in found]),
-        )
+        distances = np.fromiter([item[1] for item in found], float, len(found))
         bound = gain * (distances - safety_distance) / (influence_distance - safety_distance)
         labels = self._labels
-        nearest = self._pair(found[int(np.argmin(distances))])
-        return DamperRows(tuple(labels[row] for row in rows), distances, matrix, bound, nearest)
+        nearest = self._pair(min(found, key=lambda item: item[1]))
+        return DamperRows(tuple(labels[row] for row in rows), distances, self._damper_matrix(found), bound, nearest)
 
-    def _damper_matrix(self, rows: list[int], first: np.ndarray, second: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        """``n·(J_a(p_a) − J_b(p_b))`` per pair at the ``q`` of the last query, shape (k, n).
+    def _damper_matrix(self, found: list[tuple]) -> np.ndarray:
+        """``n·(J_a(p_a) − J_b(p_b))`` per pair of ``found`` (see :meth:`_near_pairs`) at the ``q``
+        of the last query, shape (k, n).
 
-        Column j of a point's linear Jacobian is ``z_j × (p − o_j)`` for a revolute joint that
-        moves it, ``z_j`` for a prismatic one; so ``n·J(p)`` column j is
-        ``(p × n)·z_j − n·(z_j × o_j)`` or ``n·z_j``: two small products per side, no (k, 3, n) array.
+        A point ``p`` moving with joint j has the velocity ``v_j + ω_j × p`` per unit rate
+        (``[ω_j; v_j]`` the joint's twist), so ``n·J(p)`` column j is ``(p × n)·ω_j + n·v_j``:
+        the rows ``[p × n, n]`` of both sides (plain floats: a handful of products per pair)
+        times the (6, n) twists, one product.
         """
-        chain = self.model.chain
-        joint_frames = np.matmul(self._frames_now[1:], self._to_moving)
-        axes_t = joint_frames[:, :3, 2].T  # (3, n)
-        moments = _cross(joint_frames[:, :3, 2], joint_frames[:, :3, 3])  # z_j × o_j, (n, 3)
-        k = len(rows)
-        crossed = _cross(np.concatenate([first, second]), np.concatenate([normals, normals])) @ axes_t  # (2k, n)
-        common = (normals @ moments.T) * chain.revolute_mask - (normals @ axes_t) * chain.prismatic_mask
-        return (crossed[:k] * chain.revolute_mask - common) * self._moves_first[rows] - (
-            crossed[k:] * chain.revolute_mask - common
-        ) * self._moves_second[rows]
-
-
-_NEXT, _AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise ``a × b`` of (k, 3) arrays (np.cross costs five times as much on arrays this small)."""
-    return a[:, _NEXT] * b[:, _AFTER] - a[:, _AFTER] * b[:, _NEXT]
+        k = len(found)
+        features: list[float] = []
+        for side in (2, 3):
+            for item in found:
+                px, py, pz = item[side].tolist()
+                nx, ny, nz = item[4]
+                features += (py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx, nx, ny, nz)
+        rows = [item[0] for item in found]
+        velocity = np.fromiter(features, float, 12 * k).reshape(2 * k, 6) @ self._twists  # (2k, n)
+        return velocity[:k] * self._moves_first[rows] - velocity[k:] * self._moves_second[rows]

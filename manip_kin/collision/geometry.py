@@ -236,18 +236,25 @@ def adjacent_links(reader: UrdfTree, links_with_geometry: set[str]) -> set[tuple
 
 
 def model_frames(model: RobotModel, q: np.ndarray) -> np.ndarray:
-    """Frames 0 (base) .. n of the model in base at ``q`` (n,), shape (n + 1, 4, 4).
+    """Frames 0 (base) .. n of the model in base at ``q`` (n,), shape (n + 1, 4, 4)."""
+    return frames_and_twists(model, q)[0]
 
-    Runs the model's unrolled kinematics once per frame (about twice as fast as the numpy
-    chain of :func:`~manip_kin.kinematics.forward_kinematics` on these small arrays).
+
+def frames_and_twists(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frames 0 (base) .. n in base, shape (n + 1, 4, 4), and the joints' unit twists
+    ``[ω; v]`` in base, shape (6, n), at ``q`` (n,) (see
+    :func:`~manip_kin.chain_codegen.generate_frames_source`).
+
+    One generated function for all of them: a numpy chain of 4x4 products costs its call
+    overhead per frame.
     """
-    from manip_kin.kinematics import compiled_kinematics
+    from manip_kin.kinematics import compiled_frames
 
-    values = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]
-    q_values = q.tolist()
-    for index in range(1, model.dof + 1):
-        values += compiled_kinematics(model, index, False)(q_values)
-    return np.array(values).reshape(model.dof + 1, 4, 4)
+    n = model.dof
+    values = compiled_frames(model)(q.tolist())
+    # fromiter with a count: np.array infers the type of each of the ~170 floats (4x the time).
+    values = np.fromiter(values, float, len(values))
+    return values[: 16 * (n + 1)].reshape(n + 1, 4, 4), values[16 * (n + 1) :].reshape(6, n)
 
 
 def world_poses(frames: np.ndarray, frame_of_shape: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -278,3 +285,38 @@ def sphere_gaps(centres_a: np.ndarray, centres_b: np.ndarray, radius_sums: np.nd
     """
     difference = centres_a - centres_b
     return np.sqrt((difference * difference).sum(axis=1)) - radius_sums
+
+
+#: Stands in for an unbounded prismatic travel in :func:`joint_reach` (an inf would make 0 · inf = nan).
+_FAR = 1e12
+
+
+def joint_reach(model: RobotModel, frames: np.ndarray, offsets: np.ndarray, centres: np.ndarray, radii: np.ndarray):
+    """How far a point of each shape's bounding sphere can move per unit of each joint's motion, shape (n, G).
+
+    Entry (j, g) bounds ``|∂x/∂q_j|`` over every configuration for every point ``x`` of shape
+    g's bounding sphere: 1 [m/m] for a prismatic joint, and for a revolute one the largest
+    possible distance from the joint's origin to ``x`` [m/rad]: the lengths of the links between
+    (each fixed, a prismatic joint's travel added), the shape's offset and its radius. 0 where
+    joint j does not move the shape. So a shape moves by at most ``Σ_j |Δq_j| · reach[j, g]``
+    between two configurations, whatever the path.
+
+    Args:
+        frames: model frame of each shape, shape (G,).
+        offsets: pose of each shape in its frame, shape (G, 4, 4).
+        centres: bounding-sphere centres in the shapes' frames, shape (G, 3) [m].
+        radii: bounding-sphere radii, shape (G,) [m].
+    """
+    chain, n = model.chain, model.dof
+    travel = np.minimum(np.maximum(np.abs(model.lower), np.abs(model.upper)), _FAR) * chain.prismatic_mask
+    # |o_i - o_{i-1}|, at most: from joint i-1's origin to joint i's.
+    segments = np.linalg.norm(chain.fixed[:, :3, 3], axis=1) + travel
+    centre_offsets = np.linalg.norm((offsets[:, :3, :3] @ centres[:, :, None])[:, :, 0] + offsets[:, :3, 3], axis=1)
+    reach = np.zeros((n, len(frames)))
+    for g, frame in enumerate(np.asarray(frames).tolist()):
+        if frame == 0:
+            continue
+        tail = float(np.linalg.norm(chain.frame_offsets[frame - 1][:3, 3]) + centre_offsets[g] + radii[g])
+        for j in range(frame):
+            reach[j, g] = 1.0 if chain.prismatic_mask[j] else min(float(segments[j + 1 : frame].sum()) + tail, _FAR)
+    return reach

@@ -138,6 +138,7 @@ class QpController:
         self._previous = np.zeros(model.dof)
         self._names = model.joint_names
         self._unbounded = Box(np.full(model.dof, -math.inf), np.full(model.dof, math.inf))
+        self._identity = np.eye(model.dof)
 
     def reset(self, qdot: np.ndarray | None = None) -> None:
         """Set the previous command the acceleration limit starts from (default: at rest)."""
@@ -147,7 +148,9 @@ class QpController:
         """The merged box of the safety limits (velocity, position) and the acceleration box."""
         box = self._unbounded
         for limit in self.safety_limits:
-            box = merge_boxes(box, limit.box(q, dt, self._previous))
+            # Within the unbounded box a limit's box is itself: no merge for the first.
+            bounds = limit.box(q, dt, self._previous)
+            box = bounds if box is self._unbounded else merge_boxes(box, bounds)
         acceleration = None
         if self.acceleration_limit is not None:
             acceleration = self.acceleration_limit.box(q, dt, self._previous)
@@ -182,7 +185,7 @@ class QpController:
         if jacobian is None:
             jacobian = self.pose_task.jacobian(q)
         mu = max(task.damping * task.damping, self.config.regularization)
-        hessian = jacobian.T @ jacobian + mu * np.eye(self.model.dof)
+        hessian = jacobian.T @ jacobian + mu * self._identity
         solution = solve_qp(hessian, -hessian @ desired, box.lower, box.upper, matrix, bound)
         if solution.x is not None:
             return self._output(task, solution.x, solution.status, box, acceleration, rows)

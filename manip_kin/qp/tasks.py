@@ -40,10 +40,12 @@ class PoseTask:
     model: RobotModel
     config: ControllerConfig = ControllerConfig()
     law: CartesianController = field(init=False, repr=False, compare=False)
+    _row_index: list[int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         unlimited = replace(self.config, respect_position_limits=False, respect_velocity_limits=False)
         object.__setattr__(self, "law", CartesianController(self.model, unlimited))
+        object.__setattr__(self, "_row_index", list(self.law.task.rows))
 
     @property
     def rows(self) -> tuple[int, ...]:
@@ -58,7 +60,7 @@ class PoseTask:
         """The task rows of the controlled frame's geometric Jacobian, shape (m, n)."""
         n = self.model.dof
         values = compiled_kinematics(self.model, self.law.frame_index, True)(q.tolist())
-        return np.array(values[16:]).reshape(6, n)[list(self.rows)]
+        return np.fromiter(values[16:], float, 6 * n).reshape(6, n)[self._row_index]
 
 
 @dataclass(frozen=True)
