@@ -132,13 +132,20 @@ def _add_obstacles(env: dict, base_frame: str, hand_xyz: np.ndarray) -> None:
 
     manip_kin = str(Path(sysconfig.get_path("scripts")) / "manip_kin")
     for k, arguments in enumerate(_obstacle_arguments(hand_xyz)):
-        subprocess.run(
-            [manip_kin, "obstacle", "add", "--id", str(k + 1), *arguments, "--frame", base_frame],
-            env=env,
-            capture_output=True,
-            timeout=30,
-            check=True,
-        )
+        # A fresh CLI process discovers the controller in up to 10 s; beside 1 kHz loops (at
+        # SCHED_FIFO above all) that once took longer: it tries again before giving up.
+        for _attempt in range(3):
+            done = subprocess.run(
+                [manip_kin, "obstacle", "add", "--id", str(k + 1), *arguments, "--frame", base_frame],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            if done.returncode == 0:
+                break
+        else:
+            raise RuntimeError(f"manip_kin obstacle add failed 3 times: {done.stderr.strip()}")
 
 
 def run_soak(
@@ -149,7 +156,7 @@ def run_soak(
     from live_view_client import start_client
 
     from manip_kin.kinematics import frame_pose
-    from manip_kin.pipeline import NodeProcess, Pipeline, ensure_ros_isolation, pipeline_processes
+    from manip_kin.pipeline import NodeProcess, Pipeline, PipelineError, ensure_ros_isolation, pipeline_processes
     from manip_kin.urdf import load_urdf
 
     env = ensure_ros_isolation()
@@ -208,13 +215,16 @@ def run_soak(
         rss_minute1: dict[str, int] = {}
         next_switch = time.monotonic()
         target = 1
-        lines_sent = 0
+        lines_sent = lines_unacknowledged = 0
         load = []
         while (time.monotonic_ns() - start_ns) * 1e-9 < duration_s:
             if time.monotonic() >= next_switch:
-                client.send_line(poses[target], model.base_frame)
+                try:
+                    client.send_line(poses[target], model.base_frame)
+                    lines_sent += 1
+                except PipelineError:  # not acknowledged in 10 s: counted, and the soak goes on
+                    lines_unacknowledged += 1
                 target = 1 - target
-                lines_sent += 1
                 next_switch += switch_s
             client.spin_for(0.1)
             elapsed = (time.monotonic_ns() - start_ns) * 1e-9
@@ -261,6 +271,7 @@ def run_soak(
         recorder_code=recorder_code,
         recorder_line=recorder_line,
         lines_sent=lines_sent,
+        lines_unacknowledged=lines_unacknowledged,
         load=load,
         viewer=viewer_result,
     )
@@ -292,6 +303,7 @@ class SoakRun:
     recorder_code: int | None
     recorder_line: str
     lines_sent: int
+    lines_unacknowledged: int  # line targets the generator did not acknowledge within 10 s
     load: list  # (elapsed s, 1-min load average)
     viewer: dict  # the live view client's result (test/foxglove_client/client.mjs)
 
@@ -395,6 +407,7 @@ def _summarise(run: SoakRun) -> dict:
             "window_s": window_s,
             "switch_s": run.switch_s,
             "lines_sent": run.lines_sent,
+            "lines_unacknowledged": run.lines_unacknowledged,
             "realtime_priority": run.realtime_priority,
             "robot": "panda (URDF limits, collision_avoidance, SRDF, 3 obstacles), recorder on every manip_kin "
             "topic, live_view with one client",

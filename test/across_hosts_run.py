@@ -51,7 +51,8 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
         generator=IRB120_LINE_GENERATOR,
     )
     robot_state = replace(nodes[0], prefix=pair.prefix("a"))  # on the robot's host
-    processes = [NodeProcess("recorder", "recorder", {"output": str(recording)}), robot_state, *nodes[1:]]
+    # The robot host first: its node is up before the workstation's participants start.
+    processes = [robot_state, NodeProcess("recorder", "recorder", {"output": str(recording)}), *nodes[1:]]
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
     start_pose, end_pose = make_transform(down, LINE_START), make_transform(down, LINE_END)
     statuses: list[tuple[int, str, int, str]] = []
@@ -71,8 +72,12 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
         converged, _ = client.wait_converged(client.send_goal(start_pose), 30)
         result["reached_line_start"] = bool(converged)
         line_stamp = client.send_line(end_pose)
-        result["line_sent_ns"] = time.monotonic_ns()
-        client.spin_for(down_after_s)
+        # Timed from the generator's start (the acknowledgement send_line waits for can come
+        # seconds late on a loaded machine, the line by then well under way).
+        client.wait_line_done(line_stamp, 10, finished=False)
+        streaming = [t for t, n, _, m in statuses if n == "trajectory_generator" and m == "streaming"]
+        result["line_started_ns"] = streaming[0] if streaming else time.monotonic_ns()
+        client.spin_for(max(0.0, down_after_s - (time.monotonic_ns() - result["line_started_ns"]) * 1e-9))
         pair.set_link(False)
         result["link_down_ns"], result["link_down_wall_ns"] = time.monotonic_ns(), time.time_ns()
         client.spin_for(down_s)
@@ -87,7 +92,8 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
             result["controller_at_end"] = None if status is None else status.message
         except PipelineError as error:  # said in the result; the test asserts on it
             result["line_done"] = f"not done: {error}"
-        client.spin_for(0.3)  # the last statuses reach the recorder too
+        # A few statuses after the return, here and in the recording.
+        client.spin_for(max(0.3, 2.0 - (time.monotonic_ns() - result["link_up_ns"]) * 1e-9))
         result["alive"] = {name: pipeline.running(name) for name in pipeline.processes}
         result["recorder_code"] = pipeline.stop_process("recorder", timeout=30)
         result["recorder_summary"] = pipeline.log_text("recorder").strip().splitlines()[-1]

@@ -116,7 +116,6 @@ class HostPair:
             self.run(side, "ip", "link", "set", self.links[side], "up" if up else "down")
 
 
-
 def host_env(pair: HostPair, base: Mapping[str, str], domain_id: int | str) -> dict:
     """The DDS environment of a process in either namespace (see the module docstring)."""
     env = dict(base)
