@@ -25,7 +25,8 @@ and a table:
 * the live view client: messages per topic and its ``/joint_states`` rate.
 
 Targets (issues 8 and 29), each checked in ``checks`` (value, target, pass): RSS growth ≤ 5 %
-for every process, every window ≥ 990 Hz, zero messages lost (the recorder's dropped count
+for every node (the client keeps every receive time it reports, so its growth is shown, not
+checked), every window ≥ 990 Hz, zero messages lost (the recorder's dropped count
 plus what this process saw that the file lacks), every process alive at the end, no ERROR.
 The machine is shared: load from other jobs shows in the windows, so the table carries the
 load average too.
