@@ -71,11 +71,13 @@ $(ANCHORS_STAMP): bench/requirements-anchors.txt setup.py
 bench-anchors: $(ANCHORS_STAMP)
 	$(ANCHORS_VENV)/bin/python bench/anchors.py --out bench/results/anchors.json
 
-# Full pipeline + recorder at 1 kHz for SOAK_MINUTES, lines alternating; not part of `make test`.
-# `make soak SOAK_MINUTES=1` for a short run.
+# Full pipeline (Panda: joint limits, collision geometry, obstacles) + recorder + live view with
+# a client, at 1 kHz for SOAK_MINUTES, lines alternating; not part of `make test`.
+# `make soak SOAK_MINUTES=1` for a short run; SOAK_ARGS="--realtime-priority 20" for SCHED_FIFO.
 SOAK_MINUTES ?= 10
-soak: $(STAMP)
-	$(VPY) bench/soak.py --minutes $(SOAK_MINUTES) --out bench/results/soak.json
+SOAK_ARGS ?=
+soak: $(STAMP) $(FOXGLOVE_CLIENT)
+	$(VPY) bench/soak.py --minutes $(SOAK_MINUTES) --out bench/results/soak.json $(SOAK_ARGS)
 
 # A small mutation round over the core (tools/mutate.py): a seeded sample of one-expression
 # changes per module, each run against that module's tests in a copy of the package; lists the

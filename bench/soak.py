@@ -1,22 +1,33 @@
 #!/usr/bin/env python3
-"""``make soak``: the full pipeline and the recorder at 1 kHz for minutes, lines alternating.
+"""``make soak``: the full pipeline, the recorder and the live view at 1 kHz for minutes, lines alternating.
 
-The irb120 pipeline (robot_state, cartesian_controller, trajectory_generator) and the
-recorder (every manip_kin topic) run as separate processes at ``--rate-hz``; every
-``--switch-s`` seconds a line target alternates between two poses of scenario (b) (0.4 m/s).
-Reported, as JSON (``--out``) and a table:
+The Panda pipeline (robot_state, cartesian_controller, trajectory_generator) runs with what
+a cell runs: the joint limits on (the defaults, from the URDF), ``collision_avoidance`` with
+the Panda's collision geometry and SRDF and three obstacles on ``collision_objects`` (those
+of bench_collision), the recorder (every manip_kin topic) and ``live_view`` with a Foxglove
+client connected and subscribed to every channel for the whole run
+(test/foxglove_client). Every process is separate, at ``--rate-hz``; every ``--switch-s``
+seconds a line target alternates between two poses either side of the ready pose, clear of
+the obstacles. ``--realtime-priority P`` runs the nodes' loop threads at SCHED_FIFO ``P`` (as
+``make bench`` does where permitted; 0 = normal scheduling). Reported, as JSON (``--out``)
+and a table:
 
-* per node: RSS at minute 1 and at the end (growth in %), CPU share of one core over the
-  run;
+* per process (the live view client too): RSS at minute 1 and at the end (growth in %), CPU
+  share of one core over the run, alive at the end;
 * per ``--window-s`` window: ``/joint_states`` messages received here per second, the p99
   of ``|Δstamp - period|`` of those messages, and per node the worst
   ``loop_period_error_p99_ms`` its ``/diagnostics`` reported in the window;
 * the recorder: its own summary line (dropped = sequence gaps and middleware losses), the
   count of each topic in the file, and the ``/joint_states`` messages this process saw
   while the recorder ran that are missing from the file;
-* every ERROR status on ``/diagnostics``.
+* every ERROR status on ``/diagnostics``; the controller's states (how often each was
+  reported), so a line blocked by an obstacle shows;
+* the live view client: messages per topic and its ``/joint_states`` rate.
 
-Targets (issue 8): RSS growth ≤ 5 %, every window ≥ 990 Hz, zero messages lost, no ERROR.
+Targets (issues 8 and 29), each checked in ``checks`` (value, target, pass): RSS growth ≤ 5 %
+for every node (the client keeps every receive time it reports, so its growth is shown, not
+checked), every window ≥ 990 Hz, zero messages lost (the recorder's dropped count
+plus what this process saw that the file lacks), every process alive at the end, no ERROR.
 The machine is shared: load from other jobs shows in the windows, so the table carries the
 load average too.
 
@@ -27,7 +38,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import struct
 import sys
@@ -39,9 +49,20 @@ from pathlib import Path
 
 import numpy as np
 
-LINE_START = [0.4, 0.1, 0.6]
-LINE_END = [-0.4, 0.3, 0.5]
-TARGETS = {"rss_growth_percent": 5.0, "min_window_hz": 990.0, "lost": 0, "errors": 0}
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))  # collision_robots, live_view_client
+
+#: The lines' ends: offsets [m] from the Panda's ready hand position, 0.3 m apart in y, away
+#: from bench_collision's sphere (which sits 0.16 m in front of the hand).
+LINE_OFFSETS = ([-0.05, -0.15, 0.05], [-0.05, 0.15, 0.05])
+#: The line's speed and acceleration (trapezoidal; 0.3 m at 0.2 m/s takes ~1.9 s of each 4 s).
+LINE_GENERATOR = {
+    "time_scaling": "trapezoidal",
+    "max_linear_velocity": 0.2,
+    "max_linear_acceleration": 0.5,
+    "max_angular_velocity": 1.0,
+}
+LIVE_VIEW_PORT = 18766
+TARGETS = {"rss_growth_percent": 5.0, "min_window_hz": 990.0, "lost": 0, "errors": 0, "all_alive": True}
 
 
 def _rss_kib(pid: int) -> int:
@@ -94,29 +115,79 @@ class JointStateCounter:
             time.sleep(0.005)
 
 
-def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, out_dir: Path) -> dict:
-    from diagnostic_msgs.msg import DiagnosticArray
+def _recorder_dropped(summary: str) -> int | None:
+    """The recorder's dropped count from its summary line (``...; N dropped ...``); None if absent."""
+    for part in summary.split(";"):
+        words = part.split()
+        if len(words) >= 2 and words[1] == "dropped" and words[0].isdigit():
+            return int(words[0])
+    return None
 
-    from manip_kin.pipeline import (
-        IRB120_LINE_GENERATOR,
-        NodeProcess,
-        Pipeline,
-        ensure_ros_isolation,
-        pipeline_processes,
-    )
-    from manip_kin.rotations import make_transform, rpy_to_matrix
+
+def _add_obstacles(env: dict, base_frame: str, hand_xyz: np.ndarray) -> None:
+    """bench_collision's three obstacles on ``collision_objects``, through ``manip_kin obstacle add``."""
+    import subprocess
+    import sysconfig
+
+    from bench_collision import _obstacle_arguments
+
+    manip_kin = str(Path(sysconfig.get_path("scripts")) / "manip_kin")
+    for k, arguments in enumerate(_obstacle_arguments(hand_xyz)):
+        # A fresh CLI process discovers the controller in up to 10 s; beside 1 kHz loops (at
+        # SCHED_FIFO above all) that once took longer: it tries again before giving up.
+        for _attempt in range(3):
+            done = subprocess.run(
+                [manip_kin, "obstacle", "add", "--id", str(k + 1), *arguments, "--frame", base_frame],
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            if done.returncode == 0:
+                break
+        else:
+            raise RuntimeError(f"manip_kin obstacle add failed 3 times: {done.stderr.strip()}")
+
+
+def run_soak(
+    minutes: float, rate_hz: float, window_s: float, switch_s: float, out_dir: Path, realtime_priority: int = 0
+) -> dict:
+    from collision_robots import PANDA_READY, panda_files
+    from diagnostic_msgs.msg import DiagnosticArray
+    from live_view_client import start_client
+
+    from manip_kin.kinematics import frame_pose
+    from manip_kin.pipeline import NodeProcess, Pipeline, PipelineError, ensure_ros_isolation, pipeline_processes
+    from manip_kin.urdf import load_urdf
 
     env = ensure_ros_isolation()
+    urdf, srdf, share = panda_files()
+    model = load_urdf(urdf)
+    hand = frame_pose(model, PANDA_READY, "ee")
+    poses = []
+    for offset in LINE_OFFSETS:
+        pose = hand.copy()
+        pose[:3, 3] += offset
+        poses.append(pose)
     recording = out_dir / "soak.mcap"
-    processes = [NodeProcess("recorder", "recorder", {"output": str(recording)})] + pipeline_processes(
-        "irb120",
-        rate_hz=rate_hz,
-        initial_positions=[0.0] * 6,
-        controller={"gain_linear": 6.0, "gain_angular": 6.0},
-        generator=IRB120_LINE_GENERATOR,
-    )
-    down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
-    poses = [make_transform(down, LINE_START), make_transform(down, LINE_END)]
+    processes = [
+        NodeProcess("recorder", "recorder", {"output": str(recording)}),
+        *pipeline_processes(
+            str(urdf),
+            rate_hz=rate_hz,
+            initial_positions=PANDA_READY.tolist(),
+            controller={
+                "gain_linear": 6.0,
+                "gain_angular": 6.0,
+                "collision_avoidance": True,
+                "srdf": str(srdf),
+                "mesh_search_path": share,
+            },
+            generator=LINE_GENERATOR,
+            realtime_priority=realtime_priority,
+        ),
+        NodeProcess("live_view", parameters={"port": LIVE_VIEW_PORT}, ready_status="live_view"),
+    ]
     duration_s = minutes * 60.0
     statuses: list[tuple[int, str, int, str, dict]] = []
     with Pipeline(processes, env=env, log_dir=out_dir / "logs") as pipeline:
@@ -130,23 +201,31 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
             ),
             100,
         )
-        converged, _ = client.wait_converged(client.send_goal(poses[0]), 60)
+        _add_obstacles(env, model.base_frame, hand[:3, 3])
+        converged, _ = client.wait_converged(client.send_goal(poses[0], model.base_frame), 60)
+        # Connected for the whole run (and the summary after it): a live view with a reader.
+        viewer = start_client(LIVE_VIEW_PORT, duration_s + 5.0)
+        client.spin_for(2.0)
         counter = JointStateCounter(client.node)
         counter.start()
-        names = list(pipeline.processes)
-        pids = {name: pipeline.pid(name) for name in names}
+        pids = {name: pipeline.pid(name) for name in pipeline.processes}
+        pids["live_view_client"] = viewer.pid
+        names = list(pids)
         cpu_start = {name: _cpu_seconds(pid) for name, pid in pids.items()}
         start_ns, start_wall_ns = time.monotonic_ns(), time.time_ns()
         rss_minute1: dict[str, int] = {}
         next_switch = time.monotonic()
         target = 1
-        lines_sent = 0
+        lines_sent = lines_unacknowledged = 0
         load = []
         while (time.monotonic_ns() - start_ns) * 1e-9 < duration_s:
             if time.monotonic() >= next_switch:
-                client.send_line(poses[target])
+                try:
+                    client.send_line(poses[target], model.base_frame)
+                    lines_sent += 1
+                except PipelineError:  # not acknowledged in 10 s: counted, and the soak goes on
+                    lines_unacknowledged += 1
                 target = 1 - target
-                lines_sent += 1
                 next_switch += switch_s
             client.spin_for(0.1)
             elapsed = (time.monotonic_ns() - start_ns) * 1e-9
@@ -161,7 +240,14 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
             for name, pid in pids.items()
         }
         counter.stop()
-        alive = {name: pipeline.running(name) for name in names}
+        alive = {name: pipeline.running(name) for name in pipeline.processes}
+        alive["live_view_client"] = viewer.poll() is None
+        try:
+            viewer_out, _ = viewer.communicate(timeout=30)
+            viewer_result = json.loads(viewer_out)
+        except (ValueError, OSError, __import__("subprocess").TimeoutExpired) as error:
+            viewer.kill()
+            viewer_result = {"problems": [f"no result from the client: {error}"]}
         recorder_code = pipeline.stop_process("recorder", timeout=60)
         recorder_line = pipeline.log_text("recorder").strip().splitlines()[-1]
     run = SoakRun(
@@ -169,6 +255,7 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
         rate_hz=rate_hz,
         window_s=window_s,
         switch_s=switch_s,
+        realtime_priority=realtime_priority,
         recording=recording,
         start_ns=start_ns,
         start_wall_ns=start_wall_ns,
@@ -185,7 +272,9 @@ def run_soak(minutes: float, rate_hz: float, window_s: float, switch_s: float, o
         recorder_code=recorder_code,
         recorder_line=recorder_line,
         lines_sent=lines_sent,
+        lines_unacknowledged=lines_unacknowledged,
         load=load,
+        viewer=viewer_result,
     )
     return _summarise(run)
 
@@ -198,6 +287,7 @@ class SoakRun:
     rate_hz: float
     window_s: float
     switch_s: float
+    realtime_priority: int
     recording: Path
     start_ns: int
     start_wall_ns: int  # the same instant on the system clock (robot_state stamps its messages with it)
@@ -214,7 +304,9 @@ class SoakRun:
     recorder_code: int | None
     recorder_line: str
     lines_sent: int
+    lines_unacknowledged: int  # line targets the generator did not acknowledge within 10 s
     load: list  # (elapsed s, 1-min load average)
+    viewer: dict  # the live view client's result (test/foxglove_client/client.mjs)
 
 
 def _summarise(run: SoakRun) -> dict:
@@ -274,6 +366,41 @@ def _summarise(run: SoakRun) -> dict:
     recorded = {(int(v // 1_000_000_000), int(v % 1_000_000_000)) for v in recorded_stamps}
     seen = {(int(v // 1_000_000_000), int(v % 1_000_000_000)) for v in run.stamps}
     missing = sorted(seen - recorded)
+    states: dict[str, int] = {}
+    for t, n, _, m, _ in run.statuses:
+        if n == "cartesian_controller" and start_ns <= t <= end_ns:
+            state = m.split(":")[0]
+            states[state] = states.get(state, 0) + 1
+    viewer_times = run.viewer.get("times", {}).get("/joint_states", [])
+    viewer = {
+        "counts": run.viewer.get("counts", {}),
+        "joint_states_hz": (len(viewer_times) - 1) / ((viewer_times[-1] - viewer_times[0]) * 1e-3)
+        if len(viewer_times) > 1
+        else None,
+        "problems": run.viewer.get("problems", []),
+    }
+    recorder_dropped = _recorder_dropped(run.recorder_line)
+    lost = (recorder_dropped if recorder_dropped is not None else 0) + len(missing)
+    # The client keeps every receive time it saw (its report): its memory grows by design.
+    growths = [n["rss_growth_percent"] for name, n in nodes.items() if name != "live_view_client"]
+    worst_growth = max((g for g in growths if g is not None), default=None)
+    min_hz = min((w["joint_states_hz"] for w in windows), default=0.0)
+    error_count = len(errors)
+    checks = {
+        "lost_messages": {
+            "value": lost if recorder_dropped is not None else None,
+            "target": "0",
+            "pass": recorder_dropped is not None and lost == 0,
+        },
+        "min_window_hz": {"value": min_hz, "target": f">= {TARGETS['min_window_hz']:g}", "pass": min_hz >= 990.0},
+        "worst_rss_growth_percent": {
+            "value": worst_growth,
+            "target": f"<= {TARGETS['rss_growth_percent']:g} (nodes)",
+            "pass": None not in growths and worst_growth <= TARGETS["rss_growth_percent"],
+        },
+        "all_alive": {"value": all(run.alive.values()), "target": "every process", "pass": all(run.alive.values())},
+        "error_statuses": {"value": error_count, "target": "0", "pass": error_count == 0},
+    }
     return {
         "config": {
             "minutes": run.minutes,
@@ -281,7 +408,10 @@ def _summarise(run: SoakRun) -> dict:
             "window_s": window_s,
             "switch_s": run.switch_s,
             "lines_sent": run.lines_sent,
-            "robot": "irb120, recorder on every manip_kin topic",
+            "lines_unacknowledged": run.lines_unacknowledged,
+            "realtime_priority": run.realtime_priority,
+            "robot": "panda (URDF limits, collision_avoidance, SRDF, 3 obstacles), recorder on every manip_kin "
+            "topic, live_view with one client",
             "machine": f"{os.cpu_count()} cores, shared; load average per window below",
         },
         "reached_line_start": run.reached_line_start,
@@ -295,10 +425,14 @@ def _summarise(run: SoakRun) -> dict:
             "joint_states_seen_here": len(seen),
             "joint_states_in_file": len(recorded),
             "joint_states_seen_but_not_recorded": len(missing),
+            "dropped": recorder_dropped,
         },
+        "controller_states": states,
+        "live_view_client": viewer,
         "errors": errors[:50],
-        "error_count": len(errors),
+        "error_count": error_count,
         "targets": TARGETS,
+        "checks": checks,
     }
 
 
@@ -338,8 +472,17 @@ def table(result: dict) -> str:
         f"/joint_states seen here {rec['joint_states_seen_here']}, in the file {rec['joint_states_in_file']}, "
         f"seen but not recorded {rec['joint_states_seen_but_not_recorded']} (target 0)",
         f"ERROR statuses: {result['error_count']} (target 0)",
+        f"controller states reported: {result['controller_states']}",
+        f"live view client: {result['live_view_client']['counts']}, /joint_states "
+        f"{f(result['live_view_client']['joint_states_hz'])} Hz, problems {result['live_view_client']['problems']}",
         f"load average (1 min) per window: {[round(x['load1'], 1) for x in result['load_average']]}",
+        "",
+        f"{'check':26} {'value':>12} {'target':>14} pass",
     ]
+    for name, check in result["checks"].items():
+        value = check["value"]
+        text = f"{value:.2f}" if isinstance(value, float) else str(value)
+        lines.append(f"{name:26} {text:>12} {check['target']:>14} {check['pass']}")
     return "\n".join(lines)
 
 
@@ -351,13 +494,21 @@ def main(argv=None) -> int:
     parser.add_argument("--rate-hz", type=float, default=1000.0, help="loop rate of every node [Hz] (default 1000)")
     parser.add_argument("--window-s", type=float, default=30.0, help="statistics window [s] (default 30)")
     parser.add_argument("--switch-s", type=float, default=4.0, help="a new line target every this many seconds")
+    parser.add_argument(
+        "--realtime-priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority of the nodes' loop threads (0 = normal scheduling, the default)",
+    )
     parser.add_argument("--out", default="bench/results/soak.json", help="JSON result file")
     args = parser.parse_args(argv)
     if not (args.minutes > 0 and args.rate_hz > 0 and args.window_s > 0 and args.switch_s > 0):
         parser.error("--minutes, --rate-hz, --window-s and --switch-s must be > 0")
+    if not 0 <= args.realtime_priority <= 99:
+        parser.error(f"--realtime-priority {args.realtime_priority}: valid 0 (normal scheduling) to 99")
     out_dir = Path(tempfile.mkdtemp(prefix="manip_kin_soak_"))
     print(f"soak: {args.minutes:g} min at {args.rate_hz:g} Hz; logs and recording in {out_dir}", file=sys.stderr)
-    result = run_soak(args.minutes, args.rate_hz, args.window_s, args.switch_s, out_dir)
+    result = run_soak(args.minutes, args.rate_hz, args.window_s, args.switch_s, out_dir, args.realtime_priority)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
     print(table(result))

@@ -84,6 +84,9 @@ class NodeProcess:
         ready_status: name of the node whose ``/diagnostics`` status means the node runs
             ("" = wait only for the node name in the graph); looked up in ``namespace``.
         namespace: ``-r __ns:=NS`` (``""``: the root namespace, or the :class:`Pipeline`'s).
+        prefix: a command the executable runs under, as its first words (e.g. ``("ip",
+            "netns", "exec", "robot")``: the node in another network namespace); it must
+            exec the executable (keep its pid, pass signals on). Empty: run it directly.
     """
 
     executable: str
@@ -93,6 +96,7 @@ class NodeProcess:
     remaps: Mapping[str, str] = field(default_factory=dict)
     ready_status: str = ""
     namespace: str = ""
+    prefix: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -252,7 +256,7 @@ class Pipeline:
         old = self._popen.get(name)
         if old is not None and old.poll() is None:
             raise PipelineError(f"{name} is already running (pid {old.pid})")
-        command = [find_executable(spec.executable, self.executable_dir)] + spec.arguments()
+        command = [*spec.prefix, find_executable(spec.executable, self.executable_dir), *spec.arguments()]
         env = node_environment(self.env)
         log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed in stop
         if name in self._killed and FAST_DDS_TRANSPORTS not in env:

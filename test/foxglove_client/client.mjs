@@ -39,9 +39,9 @@ function plain(value) {
 const client = new FoxgloveClient({ ws: new WebSocket(url, SUBPROTOCOLS) });
 let timer = null;
 function finish(code) {
-  console.log(JSON.stringify(result));
   client.close();
-  process.exit(code);
+  // Exit once the JSON is written: process.exit() right after a write to a pipe cuts it at 64 KiB.
+  process.stdout.write(JSON.stringify(result) + "\n", () => process.exit(code));
 }
 client.on("error", (error) => {
   result.problems.push(`connection: ${error?.message ?? error}`);
