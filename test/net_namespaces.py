@@ -14,9 +14,9 @@ addresses, on UDP only. Why each:
 * LOCALHOST (the tests' setting) sends discovery to 127.0.0.1 only; a namespace's loopback is
   its own, so nothing would cross. SUBNET is safe here: the namespace's only interfaces are
   its ``lo`` and its veth end, whose subnet has one other host, the other namespace.
-* A namespace has no route to multicast (no default route), so SUBNET's multicast discovery
-  alone may find nothing; the static peers make Fast DDS send its unicast discovery to the
-  other side's address as well (rmw_fastrtps adds them to the initial peers; a process's own
+* A namespace has no route to multicast (no default route): each gets one over its veth end
+  (224.0.0.0/4), without which discovery across took about 40 s in four runs in a row. The
+  static peers make Fast DDS send its unicast discovery to the other side's address as well (rmw_fastrtps adds them to the initial peers; a process's own
   address among them costs it a few discovery packets to itself, and keeps one environment
   for both sides, so a process started across with ``ip netns exec`` inherits the right one).
 * ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``: namespaces share /dev/shm, so Fast DDS's shared-memory
@@ -89,6 +89,9 @@ class HostPair:
                 self.run(side, "ip", "link", "set", "lo", "up")
                 self.run(side, "ip", "addr", "add", f"{self.addresses[side]}/24", "dev", self.links[side])
                 self.run(side, "ip", "link", "set", self.links[side], "up")
+                # Multicast over the veth: Fast DDS's participant announcements reach the other side
+                # without depending on the static peers' port guesses alone.
+                self.run(side, "ip", "route", "add", "224.0.0.0/4", "dev", self.links[side])
         except BaseException:
             self.remove()
             raise
