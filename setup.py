@@ -26,11 +26,11 @@ setup(
     entry_points={
         "console_scripts": [
             "manip_kin = manip_kin.cli:main",
-            "robot_state = manip_kin.nodes.robot_state:main",
-            "cartesian_controller = manip_kin.nodes.cartesian_controller:main",
-            "trajectory_generator = manip_kin.nodes.trajectory_generator:main",
-            "recorder = manip_kin.nodes.recorder:main",
-            "live_view = manip_kin.nodes.live_view:main",
+            "robot_state = manip_kin.ros.nodes.robot_state:main",
+            "cartesian_controller = manip_kin.ros.nodes.cartesian_controller:main",
+            "trajectory_generator = manip_kin.ros.nodes.trajectory_generator:main",
+            "recorder = manip_kin.ros.nodes.recorder:main",
+            "live_view = manip_kin.ros.nodes.live_view:main",
         ],
     },
 )

@@ -3,7 +3,7 @@
 
 Runs in its own venv (``.venv-anchors``, see ``bench/requirements-anchors.txt``); the package
 never depends on these libraries. For each robot (genova7, exported to URDF by
-:func:`manip_kin.urdf.model_to_urdf`; the Franka Panda URDF of example-robot-data, tip
+:func:`manip_kin.core.urdf.model_to_urdf`; the Franka Panda URDF of example-robot-data, tip
 ``panda_hand``) every library gets the same random configurations, goals and IK targets,
 and the libraries are interleaved block by block in every round, so that the machine's
 drift hits all of them alike. Before anything is timed, every library's FK and Jacobian is
@@ -96,8 +96,8 @@ def _stripped_urdf(path: Path, directory: str) -> str:
 def setups(directory: str) -> list[Setup]:
     from robot_data_files import example_robot_data_urdf
 
-    from manip_kin.robots import load_robot
-    from manip_kin.urdf import load_urdf, model_to_urdf
+    from manip_kin.core.robots import load_robot
+    from manip_kin.core.urdf import load_urdf, model_to_urdf
 
     genova = load_robot("genova7")
     genova_path = Path(directory) / "genova7.urdf"
@@ -116,8 +116,8 @@ def setups(directory: str) -> list[Setup]:
 def functions(setup: Setup) -> dict[str, dict]:
     import pinocchio as pin
 
-    from manip_kin.control import CartesianController, ControllerConfig
-    from manip_kin.kinematics import pose_and_jacobian_in_base, pose_in_base
+    from manip_kin.control.resolved_rate import CartesianController, ControllerConfig
+    from manip_kin.core.kinematics import pose_and_jacobian_in_base, pose_in_base
 
     model, frame = setup.model, setup.frame_index
     pm, pd, fid, ets = setup.pin_model, setup.pin_data, setup.pin_frame, setup.ets
@@ -166,7 +166,7 @@ def functions(setup: Setup) -> dict[str, dict]:
 
 def check_agreement(setup: Setup, configurations) -> float:
     """Largest difference of the other libraries' FK and Jacobian from manip_kin's; exits if > 1e-9."""
-    from manip_kin.kinematics import pose_and_jacobian_in_base
+    from manip_kin.core.kinematics import pose_and_jacobian_in_base
 
     timed = functions(setup)["fk_jacobian"]
     worst = 0.0
@@ -273,9 +273,9 @@ def singular_versus_regular(setup: Setup, step, cases: list, rounds: int) -> dic
 
 
 def bench_ik(setup: Setup, n_targets: int, rounds: int, seed: int) -> dict:
-    from manip_kin.control import pose_error
-    from manip_kin.ik import solve_ik
-    from manip_kin.kinematics import frame_pose
+    from manip_kin.control.resolved_rate import pose_error
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.ik.iterative import solve_ik
 
     model = setup.model
     rng = np.random.default_rng(seed)
@@ -316,7 +316,7 @@ def bench_ik(setup: Setup, n_targets: int, rounds: int, seed: int) -> dict:
 def bench_batched(setup: Setup, count: int, rounds: int, seed: int) -> dict:
     import pinocchio as pin
 
-    from manip_kin.kinematics import batch_frame_pose
+    from manip_kin.core.kinematics import batch_frame_pose
 
     model = setup.model
     rng = np.random.default_rng(seed)
@@ -401,8 +401,8 @@ def main() -> int:
     except ImportError as error:
         print(f"bench-anchors needs pinocchio (pin) and roboticstoolbox-python: {error}", file=sys.stderr)
         return 2
-    from manip_kin.kinematics import frame_pose
-    from manip_kin.rotations import angle_axis_to_matrix, make_transform
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.rotations import angle_axis_to_matrix, make_transform
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="manip_kin_anchors_") as directory:

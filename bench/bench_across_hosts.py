@@ -1,4 +1,4 @@
-"""Across hosts: two network namespaces joined by a veth pair (test/net_namespaces.py), against
+"""Across hosts: two network namespaces joined by a veth pair (test/support/net_namespaces.py), against
 one namespace's loopback. Needs root and ``ip``; prints why not otherwise.
 
 Rows (JSON to ``--out`` and a table):
@@ -9,7 +9,7 @@ Rows (JSON to ``--out`` and a table):
 * goal-to-first-reacting-command latency (bench_nodes' measurement, genova7 at 1 kHz): the
   measuring process and robot_state on ``a``; cartesian_controller and trajectory_generator
   on ``b`` (across: the goal crosses the link, the command crosses back) or on ``a``;
-* the link down for 2 s during a line (test/across_hosts_run.py): how long until the
+* the link down for 2 s during a line (test/support/across_hosts_run.py): how long until the
   controller said ``stale input``, how long after the link's return until it no longer
   did, its state at the end, the widest gap in the recorded ``joint_states`` (receive
   times) and in their stamps.
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "test"))  # net_namespaces, across_hosts_run
+sys.path.insert(0, str(HERE.parent / "test" / "support"))  # net_namespaces, across_hosts_run
 
 from net_namespaces import HostPair, host_env, unavailable_reason  # noqa: E402
 
@@ -120,7 +120,7 @@ def _link_row(pair: HostPair, env: dict) -> dict:
     from manip_kin.recording import read_messages
 
     out = Path(tempfile.mkdtemp(prefix="bench_across_link_"))
-    driver = HERE.parent / "test" / "across_hosts_run.py"
+    driver = HERE.parent / "test" / "support" / "across_hosts_run.py"
     subprocess.run(
         [*pair.prefix("b"), sys.executable, str(driver), "--pair", pair.tag, "--out", str(out)],
         env=env,

@@ -11,16 +11,16 @@ from __future__ import annotations
 import numpy as np
 from bench_motion import benchmark_ik
 
-from manip_kin.closed_form import closed_form_solutions, closed_form_solver
-from manip_kin.kinematics import frame_pose
-from manip_kin.robots import load_robot
-from manip_kin.tasks import default_task
+from manip_kin.core.kinematics import frame_pose
+from manip_kin.core.pose_rows import default_task
+from manip_kin.core.robots import load_robot
+from manip_kin.ik.closed_form import closed_form_solutions, closed_form_solver
 
 
 def _arms():
     from robot_data_files import example_robot_data_urdf
 
-    from manip_kin.urdf import load_urdf
+    from manip_kin.core.urdf import load_urdf
 
     arms = [(name, load_robot(name)) for name in ("rpp", "scara", "irb120")]
     arms.append(("kinova jaco (URDF)", load_urdf(example_robot_data_urdf("kinova_description/robots/kinova.urdf"))))

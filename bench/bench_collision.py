@@ -34,10 +34,10 @@ def _panda_scene():
     from collision_robots import PANDA_READY, panda_files
 
     from manip_kin.collision.collision_model import load_collision_model
-    from manip_kin.kinematics import frame_pose
-    from manip_kin.rotations import make_transform
-    from manip_kin.scene import Scene, make_obstacle
-    from manip_kin.urdf import load_urdf
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.rotations import make_transform
+    from manip_kin.core.scene import Scene, make_obstacle
+    from manip_kin.core.urdf import load_urdf
 
     urdf, srdf, share = panda_files()
     model = load_urdf(urdf)
@@ -70,10 +70,10 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
     from collision_robots import PANDA_READY
 
     from manip_kin.collision.distances import CollisionChecker
-    from manip_kin.control import CartesianController
-    from manip_kin.kinematics import frame_pose
-    from manip_kin.qp.law import QpController
-    from manip_kin.qp.solver import SolveStatus
+    from manip_kin.control.qp.law import QpController
+    from manip_kin.control.qp.solver import SolveStatus
+    from manip_kin.control.resolved_rate import CartesianController
+    from manip_kin.core.kinematics import frame_pose
 
     model, collision, scene = _panda_scene()
     checker = CollisionChecker(model, collision)
@@ -228,9 +228,9 @@ def benchmark_controller_cpu(windows: int = 3, window_s: float = 4.0) -> list[di
     from bench_nodes import _cpu_seconds
     from collision_robots import PANDA_READY, panda_files
 
-    from manip_kin.kinematics import frame_pose
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.urdf import load_urdf
     from manip_kin.pipeline import Pipeline, pipeline_processes
-    from manip_kin.urdf import load_urdf
 
     manip_kin = str(Path(sysconfig.get_path("scripts")) / "manip_kin")
     urdf, srdf, share = panda_files()

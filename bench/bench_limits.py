@@ -2,8 +2,8 @@
 
 ``run_limits_benchmarks()`` returns rows for ``bench/run.py`` (section ``limits``):
 
-* the command filter's cost per cycle (:meth:`manip_kin.command_filter.CommandFilter.update`)
-  against the control step (:meth:`manip_kin.control.CartesianController.step`), timed in the
+* the command filter's cost per cycle (:meth:`manip_kin.control.command_filter.CommandFilter.update`)
+  against the control step (:meth:`manip_kin.control.resolved_rate.CartesianController.step`), timed in the
   same closed loop at 1 kHz: genova7 and the Franka Panda URDF, a new random goal every 0.2 s
   (transients, reversals, braking before position limits), and as a worst case a random target
   every call (ruckig computes a new profile each time);
@@ -41,7 +41,7 @@ WITH, WITHOUT = "with limits", "without limits"
 
 
 def without_limits_parameters(model) -> dict:
-    """Controller parameters that switch the command filter off (test/node_harness.py's
+    """Controller parameters that switch the command filter off (test/support/node_harness.py's
     ``without_acceleration_limits``, the same layout)."""
     from node_harness import without_acceleration_limits
 
@@ -76,9 +76,9 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
     """
     from bench_motion import _timer_overhead_ns
 
-    from manip_kin.command_filter import CommandFilter, FilterResult
-    from manip_kin.control import CartesianController, ControllerConfig
-    from manip_kin.kinematics import pose_in_base
+    from manip_kin.control.command_filter import CommandFilter, FilterResult
+    from manip_kin.control.resolved_rate import CartesianController, ControllerConfig
+    from manip_kin.core.kinematics import pose_in_base
 
     rng = np.random.default_rng(seed)
     both = limits_on_and_off(model)
@@ -162,7 +162,7 @@ def benchmark_filter(model, n: int = 20_000, dt: float = 0.001, goal_every: int 
 def filter_rows(n: int = 20_000) -> list[dict]:
     from run import panda_model
 
-    from manip_kin.robots import load_robot
+    from manip_kin.core.robots import load_robot
 
     rows = []
     for label, model in (("genova7", load_robot("genova7")), ("panda (URDF)", panda_model())):
@@ -179,7 +179,7 @@ def filter_rows(n: int = 20_000) -> list[dict]:
 
 def limits_on_and_off(model) -> dict:
     """The default limits of ``model`` and the same with every acceleration and jerk limit off."""
-    from manip_kin.joint_limits import JointLimits
+    from manip_kin.control.joint_limits import JointLimits
 
     defaults = JointLimits.of(model)
     off = {"has_acceleration_limits": False, "has_jerk_limits": False}
@@ -199,9 +199,9 @@ def closed_loop(model, limits, reference, q0, steps: int, gain: float, dt: float
         ``points`` (controlled frame positions after each step, shape (k, 3)), ``steps``
         (steps run) and ``lag`` (the largest ``|law's rate - command|`` of any joint [rad/s | m/s]).
     """
-    from manip_kin.command_filter import CommandFilter
-    from manip_kin.control import CartesianController, ControllerConfig
-    from manip_kin.kinematics import pose_in_base
+    from manip_kin.control.command_filter import CommandFilter
+    from manip_kin.control.resolved_rate import CartesianController, ControllerConfig
+    from manip_kin.core.kinematics import pose_in_base
 
     controller = CartesianController(model, ControllerConfig(gain_angular=gain, gain_linear=gain))
     command_filter = CommandFilter(limits, model.lower, model.upper, dt)
@@ -224,11 +224,11 @@ def offline_rows(dt: float = 0.001) -> list[dict]:
     """Without ROS (:func:`closed_loop`), with and without the limits: the irb120 line of
     bench_nodes (0.4 m/s, IRB120_LINE_GENERATOR's trapezoid, gains 6/s, feed-forward twist) and
     genova7's pose goal scenario. No timing in them: what the filter alone changes."""
-    from manip_kin.ik import solve_ik
+    from manip_kin.core.robots import load_robot
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
+    from manip_kin.ik.iterative import solve_ik
+    from manip_kin.motion.lines import LineTrajectory, MotionLimits, distance_to_segment
     from manip_kin.pipeline import IRB120_LINE_GENERATOR
-    from manip_kin.robots import load_robot
-    from manip_kin.rotations import make_transform, rpy_to_matrix
-    from manip_kin.trajectory import LineTrajectory, MotionLimits, distance_to_segment
 
     irb120 = load_robot("irb120")
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
@@ -274,8 +274,8 @@ def offline_rows(dt: float = 0.001) -> list[dict]:
 
 def _exponential_time(model, goal) -> float:
     """Pure exponential convergence from GENOVA7_Q0 at 0.8 1/s to the tolerances 1e-4 m, 1e-3 rad [s]."""
-    from manip_kin.control import pose_error
-    from manip_kin.kinematics import frame_pose
+    from manip_kin.control.resolved_rate import pose_error
+    from manip_kin.core.kinematics import frame_pose
 
     orientation, position = pose_error(frame_pose(model, GENOVA7_Q0), goal)
     return max(math.log(np.linalg.norm(position) / 1e-4), math.log(np.linalg.norm(orientation) / 1e-3)) / 0.8
@@ -283,9 +283,9 @@ def _exponential_time(model, goal) -> float:
 
 def _converge_row(controller: dict, tag: str) -> dict:
     """genova7's pose goal scenario at 1 kHz: the time until the controller reports converged."""
+    from manip_kin.core.robots import load_robot
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
     from manip_kin.pipeline import Pipeline, pipeline_processes
-    from manip_kin.robots import load_robot
-    from manip_kin.rotations import make_transform, rpy_to_matrix
 
     model = load_robot("genova7")
     goal = make_transform(rpy_to_matrix(*GENOVA7_GOAL[1]), GENOVA7_GOAL[0])
@@ -317,8 +317,8 @@ def node_rows(rounds: int = 2) -> list[dict]:
     ``rounds`` rounds (the order alternating), then the ratios with/without of each round."""
     from bench_nodes import _line_row, _loop_rows
 
+    from manip_kin.core.robots import load_robot
     from manip_kin.pipeline import ensure_ros_isolation
-    from manip_kin.robots import load_robot
 
     ensure_ros_isolation()
     configurations = {

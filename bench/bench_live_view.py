@@ -24,7 +24,7 @@ LIVE_VIEW_PORT = 18765
 
 
 def _stalled_client(port: int) -> socket.socket:
-    # The same silent client as test/test_live_view.py's.
+    # The same silent client as test/ros/nodes/test_live_view.py's.
     from test_live_view import _stalled_client as connect
 
     return connect(port)

@@ -14,12 +14,12 @@ import time
 
 import numpy as np
 
-from manip_kin.control import CartesianController, ControllerConfig, pose_error
-from manip_kin.ik import solve_ik
-from manip_kin.kinematics import KinematicsData, forward_kinematics
-from manip_kin.model import RobotModel
-from manip_kin.rotations import angle_axis_to_matrix, make_transform
-from manip_kin.tasks import parse_task
+from manip_kin.control.resolved_rate import CartesianController, ControllerConfig, pose_error
+from manip_kin.core.kinematics import KinematicsData, forward_kinematics
+from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_rows import parse_task
+from manip_kin.core.rotations import angle_axis_to_matrix, make_transform
+from manip_kin.ik.iterative import solve_ik
 
 
 def _timer_overhead_ns(samples: int = 2000) -> float:
@@ -96,7 +96,7 @@ def benchmark_control_step(model: RobotModel, n: int = 20000, seed: int = 0, dt:
 
 
 def benchmark_ik(model: RobotModel, n_targets: int = 2000, seed: int = 0, **ik_options) -> dict:
-    """Success rate and wall time of :func:`manip_kin.ik.solve_ik` on reachable targets.
+    """Success rate and wall time of :func:`manip_kin.ik.iterative.solve_ik` on reachable targets.
 
     Targets are the frame poses of uniformly random configurations within the limits; each
     solve starts from another random configuration. Success means position error < 1e-5 m
@@ -153,13 +153,13 @@ def benchmark_ik(model: RobotModel, n_targets: int = 2000, seed: int = 0, **ik_o
 
 
 def _models() -> dict[str, RobotModel]:
-    from manip_kin.robots import load_robot
+    from manip_kin.core.robots import load_robot
 
     models = {"genova7": load_robot("genova7")}
     try:
         from robot_data_files import example_robot_data_urdf
 
-        from manip_kin.urdf import load_urdf
+        from manip_kin.core.urdf import load_urdf
 
         models["panda (URDF)"] = load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"))
     except (ImportError, FileNotFoundError) as error:

@@ -74,8 +74,8 @@ def _loop_rows(
     ``controller``: extra controller parameters, named by ``tag`` in the labels; ``floor``:
     with the round-trip row beside the pipeline (at 1 kHz); ``latency_steps``: one latency row
     per ``(goal step [m], trials)``."""
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
     from manip_kin.pipeline import Pipeline, pipeline_processes
-    from manip_kin.rotations import make_transform, rpy_to_matrix
 
     goal = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])
     label = f"{rate_hz:g} Hz" + (f", SCHED_FIFO {priority}" if priority else "") + (f", {tag}" if tag else "")
@@ -133,9 +133,9 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500, step_m:
     (10 µm on genova7) measures the reaction alone."""
     from std_msgs.msg import Float64MultiArray
 
-    from manip_kin.kinematics import pose_and_jacobian_in_base
-    from manip_kin.nodes.conversions import make_pose_stamped
-    from manip_kin.robots import load_robot
+    from manip_kin.core.kinematics import pose_and_jacobian_in_base
+    from manip_kin.core.robots import load_robot
+    from manip_kin.ros.wire.messages import make_pose_stamped
 
     model = load_robot("genova7")
     client = pipeline.client()
@@ -149,8 +149,8 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500, step_m:
     from rclpy.qos import QoSProfile
     from rclpy.serialization import deserialize_message
 
-    from manip_kin.nodes.polling import RawSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, SharedPriority, set_timer_slack, share_realtime_priority
+    from manip_kin.ros.runtime.polling import RawSubscription
+    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, SharedPriority, set_timer_slack, share_realtime_priority
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
     # this thread and the ones it waits on (as in the nodes) get the same priority, or the
@@ -236,8 +236,8 @@ def _echo(seconds: float) -> None:
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
-    from manip_kin.nodes.polling import LoopWaiter, PolledSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.runtime.polling import LoopWaiter, PolledSubscription
+    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
 
     rclpy.init()
     node = rclpy.create_node("bench_echo")
@@ -267,8 +267,8 @@ def _round_trip_row(trials: int = 300, label: str = "idle machine") -> dict:
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
-    from manip_kin.nodes.polling import PolledSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.runtime.polling import PolledSubscription
+    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
 
     echo = subprocess.Popen([sys.executable, __file__, "echo", str(trials * 0.02 + 15)])
     context = rclpy.Context()
@@ -381,10 +381,10 @@ def _line_row(
     from nav_msgs.msg import Path
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from manip_kin.nodes.conversions import pose_stamped_to_matrix
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
+    from manip_kin.motion.lines import distance_to_segment
     from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, pipeline_processes
-    from manip_kin.rotations import make_transform, rpy_to_matrix
-    from manip_kin.trajectory import distance_to_segment
+    from manip_kin.ros.wire.messages import pose_stamped_to_matrix
 
     start, end = [0.4, 0.1, 0.6], [-0.4, 0.3, 0.5]
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
@@ -434,9 +434,9 @@ def _line_row(
 
 
 def _two_pipeline_rows(rate_hz: float = 500.0, priority: int = 0, window: float = 6.0) -> list[dict]:
-    from manip_kin.kinematics import frame_pose
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.robots import load_robot
     from manip_kin.pipeline import Pipeline, pipeline_processes
-    from manip_kin.robots import load_robot
 
     arms = {
         "/left": ("genova7", None, frame_pose(load_robot("genova7"), [1.8, -0.6, 0.2, -0.9, 0.2, 0.1, 1.0])),

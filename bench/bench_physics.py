@@ -37,8 +37,8 @@ def _panda_mesh_search_path() -> str:
 def physics_step_rows(repeats: int = 3000) -> list[dict]:
     from run import _time_calls
 
+    from manip_kin.core.robots import bundled_robot_names, load_robot
     from manip_kin.plant.mujoco_plant import MujocoPlant, PhysicsConfig
-    from manip_kin.robots import bundled_robot_names, load_robot
 
     rows = []
     arms = [(name, load_robot(name), None, "") for name in bundled_robot_names()]
@@ -82,8 +82,8 @@ def _goal_run(
 ) -> dict:
     from geometry_msgs.msg import PoseStamped
 
-    from manip_kin.nodes.conversions import pose_stamped_to_matrix
     from manip_kin.pipeline import Pipeline, pipeline_processes
+    from manip_kin.ros.wire.messages import pose_stamped_to_matrix
 
     processes = pipeline_processes(
         robot, rate_hz=rate_hz, initial_positions=q0, robot_state={"plant": plant, **robot_state}
@@ -115,9 +115,9 @@ def _goal_run(
 
 
 def tracking_rows(only_panda: bool = False) -> list[dict]:
-    from manip_kin.kinematics import frame_pose
-    from manip_kin.robots import load_robot
-    from manip_kin.rotations import make_transform, rpy_to_matrix
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.robots import load_robot
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
 
     rows = []
     genova_goal = make_transform(rpy_to_matrix(0.0, 1.57, 0.0), [0.2, -0.7, 0.3])

@@ -23,10 +23,10 @@ def _twist_latency_row(rate_hz: float, priority: int, trials: int) -> dict:
     from rclpy.qos import QoSProfile
     from std_msgs.msg import Float64MultiArray
 
-    from manip_kin.nodes.conversions import make_twist_stamped
-    from manip_kin.nodes.polling import RawSubscription
-    from manip_kin.nodes.rate_loop import TIMER_SLACK_NS, set_timer_slack
     from manip_kin.pipeline import Pipeline, pipeline_processes
+    from manip_kin.ros.runtime.polling import RawSubscription
+    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.wire.messages import make_twist_stamped
 
     processes = pipeline_processes(
         "genova7", rate_hz=rate_hz, controller={"command_timeout": 0.05}, realtime_priority=priority

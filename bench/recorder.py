@@ -49,7 +49,7 @@ def benchmark_writer(n_messages: int = 20_000, joints: int = 7, compression: str
     """
     from rclpy.serialization import serialize_message
 
-    from manip_kin.recording.cdr import CdrLayout
+    from manip_kin.recording.cdr_measure import CdrLayout
     from manip_kin.recording.msgdef import local_definitions
     from manip_kin.recording.writer import RecordingWriter
 
@@ -132,7 +132,7 @@ def publish_load(rate_hz: float, duration_s: float, n_topics: int, depth: int = 
     """
     import rclpy
 
-    from manip_kin.recording.messages import message_class
+    from manip_kin.recording.reader import message_class
 
     rclpy.init(args=[])
     node = rclpy.create_node("recorder_bench_load")
@@ -202,7 +202,7 @@ def benchmark_recorder(rate_hz: float = 1000.0, duration_s: float = 8.0, n_topic
             [
                 sys.executable,
                 "-m",
-                "manip_kin.nodes.recorder",
+                "manip_kin.ros.nodes.recorder",
                 "--ros-args",
                 "-p",
                 f"output:={output}",

@@ -67,14 +67,14 @@ def panda_model():
     """The 7-DoF Franka Panda URDF from example-robot-data (tip: the hand)."""
     from robot_data_files import example_robot_data_urdf
 
-    from manip_kin.urdf import load_urdf
+    from manip_kin.core.urdf import load_urdf
 
     return load_urdf(example_robot_data_urdf("panda_description/urdf/panda.urdf"), tip_link="panda_hand")
 
 
 def bench_core(repeats: int) -> list[dict]:
-    from manip_kin.kinematics import batch_frame_pose, pose_and_jacobian_in_base, pose_in_base
-    from manip_kin.robots import load_robot
+    from manip_kin.core.kinematics import batch_frame_pose, pose_and_jacobian_in_base, pose_in_base
+    from manip_kin.core.robots import load_robot
 
     rows = []
     for label, model in (("genova7", load_robot("genova7")), ("panda (URDF)", panda_model())):
@@ -121,7 +121,7 @@ def _timed(function) -> float:
 def bench_motion(repeats: int, ik_targets: int) -> list[dict]:
     from bench_motion import benchmark_control_step, benchmark_ik
 
-    from manip_kin.robots import load_robot
+    from manip_kin.core.robots import load_robot
 
     rows = []
     for label, model in (("genova7", load_robot("genova7")), ("panda (URDF)", panda_model())):

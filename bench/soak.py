@@ -88,8 +88,8 @@ class JointStateCounter:
     def __init__(self, node):
         from sensor_msgs.msg import JointState
 
-        from manip_kin.nodes.polling import PolledSubscription
-        from manip_kin.nodes.topics import latest_state_qos
+        from manip_kin.ros.runtime.polling import PolledSubscription
+        from manip_kin.ros.wire.topics import latest_state_qos
 
         self._sub = PolledSubscription(node, JointState, "/joint_states", latest_state_qos(2000))
         self.arrivals: list[int] = []
@@ -156,9 +156,9 @@ def run_soak(
     from diagnostic_msgs.msg import DiagnosticArray
     from live_view_client import start_client
 
-    from manip_kin.kinematics import frame_pose
+    from manip_kin.core.kinematics import frame_pose
+    from manip_kin.core.urdf import load_urdf
     from manip_kin.pipeline import NodeProcess, Pipeline, PipelineError, ensure_ros_isolation, pipeline_processes
-    from manip_kin.urdf import load_urdf
 
     env = ensure_ros_isolation()
     urdf, srdf, share = panda_files()

@@ -100,7 +100,7 @@ def panda():
     from collision_robots import panda_files
 
     from manip_kin.collision.collision_model import load_collision_model
-    from manip_kin.urdf import load_urdf
+    from manip_kin.core.urdf import load_urdf
 
     urdf, srdf, share = panda_files()
     model = load_urdf(urdf)
@@ -113,7 +113,7 @@ def ball_arm():
     from collision_robots import BALL_ARM_URDF
 
     from manip_kin.collision.collision_model import load_collision_model
-    from manip_kin.urdf import load_urdf_string
+    from manip_kin.core.urdf import load_urdf_string
 
     model = load_urdf_string(BALL_ARM_URDF, tip_link="tip")
     return model, load_collision_model(model, BALL_ARM_URDF, samples=300)

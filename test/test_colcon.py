@@ -29,7 +29,9 @@ def test_installed_share_has_package_xml_and_bundled_robots(colcon_install):
 
 def test_installed_cli_finds_robots_through_the_ament_index(colcon_install):
     lib, env = colcon_install.lib, colcon_install.env
-    code = "from manip_kin.robots import config_dir; import manip_kin; print(config_dir()); print(manip_kin.__file__)"
+    code = (
+        "from manip_kin.core.robots import config_dir; import manip_kin; print(config_dir()); print(manip_kin.__file__)"
+    )
     result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60, cwd="/")
     assert result.returncode == 0, result.stderr
     config, module = result.stdout.split()

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from manip_kin.cli import build_parser
-from manip_kin.nodes import cartesian_controller, live_view, recorder_config, robot_state, trajectory_generator
-from manip_kin.nodes.topics import PIPELINE_TOPIC_TYPES
+from manip_kin.ros.nodes import cartesian_controller, live_view, recorder_config, robot_state, trajectory_generator
+from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "interfaces.md").read_text()

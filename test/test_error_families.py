@@ -14,8 +14,8 @@ import pytest
 
 import manip_kin
 from manip_kin.errors import InputError, ManipKinError, OperationError, exit_code_for
-from manip_kin.nodes.looping_node import LoopGaveUpError
-from manip_kin.nodes.validation import InvalidMessageError
+from manip_kin.ros.runtime.looping_node import LoopGaveUpError
+from manip_kin.ros.wire.validation import InvalidMessageError
 
 
 def _defined_exceptions() -> list[type]:

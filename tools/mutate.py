@@ -34,26 +34,34 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Module -> the test files that should catch a change to it (kept small: they run per mutant).
 TARGETS: dict[str, tuple[str, ...]] = {
-    "manip_kin/model.py": ("test/test_kinematics.py", "test/test_mutation_survivors.py"),
-    "manip_kin/kinematics.py": ("test/test_kinematics.py",),
-    "manip_kin/rotations.py": ("test/test_rotations.py", "test/test_mutation_survivors.py"),
-    "manip_kin/chain_codegen.py": ("test/test_kinematics.py",),
-    "manip_kin/unrolled_linalg.py": ("test/test_control.py",),
-    "manip_kin/damped_least_squares.py": (
-        "test/test_control.py",
-        "test/test_reference_law.py",
-        "test/test_mutation_survivors.py",
+    "manip_kin/core/model.py": ("test/core/test_kinematics.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/core/kinematics.py": ("test/core/test_kinematics.py",),
+    "manip_kin/core/rotations.py": ("test/core/test_rotations.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/codegen/chain.py": ("test/core/test_kinematics.py",),
+    "manip_kin/codegen/unrolled_linalg.py": ("test/control/test_control.py",),
+    "manip_kin/core/damped_least_squares.py": (
+        "test/control/test_control.py",
+        "test/control/test_reference_law.py",
+        "test/core/test_mutation_survivors.py",
     ),
-    "manip_kin/fast_step.py": ("test/test_control.py", "test/test_reference_law.py"),
-    "manip_kin/control.py": ("test/test_control.py", "test/test_reference_law.py", "test/test_mutation_survivors.py"),
-    "manip_kin/tasks.py": ("test/test_control.py", "test/test_mutation_survivors.py"),
-    "manip_kin/ik_iteration.py": ("test/test_ik.py", "test/test_mutation_survivors.py"),
-    "manip_kin/ik_codegen.py": ("test/test_ik.py",),
-    "manip_kin/closed_form/scara.py": ("test/test_closed_form.py", "test/test_mutation_survivors.py"),
-    "manip_kin/closed_form/rpp.py": ("test/test_closed_form.py", "test/test_ik.py", "test/test_mutation_survivors.py"),
-    "manip_kin/bounds.py": ("test/test_mutation_survivors.py", "test/test_hostile_inputs.py"),
-    "manip_kin/nodes/validation.py": ("test/test_conversions.py", "test/test_mutation_survivors.py"),
-    "manip_kin/simulation.py": ("test/test_simulation.py",),
+    "manip_kin/codegen/control_step.py": ("test/control/test_control.py", "test/control/test_reference_law.py"),
+    "manip_kin/control/resolved_rate.py": (
+        "test/control/test_control.py",
+        "test/control/test_reference_law.py",
+        "test/core/test_mutation_survivors.py",
+    ),
+    "manip_kin/core/pose_rows.py": ("test/control/test_control.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/ik/iteration.py": ("test/ik/test_ik.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/codegen/ik_step.py": ("test/ik/test_ik.py",),
+    "manip_kin/ik/closed_form/scara.py": ("test/ik/test_closed_form.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/ik/closed_form/rpp.py": (
+        "test/ik/test_closed_form.py",
+        "test/ik/test_ik.py",
+        "test/core/test_mutation_survivors.py",
+    ),
+    "manip_kin/core/bounds.py": ("test/core/test_mutation_survivors.py", "test/ros/wire/test_hostile_inputs.py"),
+    "manip_kin/ros/wire/validation.py": ("test/ros/wire/test_conversions.py", "test/core/test_mutation_survivors.py"),
+    "manip_kin/control/simulation.py": ("test/control/test_simulation.py",),
 }
 
 _COMPARE_SWAPS = {

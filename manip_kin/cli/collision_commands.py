@@ -173,9 +173,9 @@ def build_marker_array(args: argparse.Namespace, stamp):
     """The ``MarkerArray`` of an ``obstacle`` command (checked like the controller will)."""
     from visualization_msgs.msg import Marker, MarkerArray
 
-    from manip_kin.nodes.messages import fill_pose
-    from manip_kin.rotations import make_transform, rpy_to_matrix
-    from manip_kin.scene import MARKER_OF_SHAPE, MarkerAction, ShapeKind, make_obstacle
+    from manip_kin.core.rotations import make_transform, rpy_to_matrix
+    from manip_kin.core.scene import MARKER_OF_SHAPE, MarkerAction, ShapeKind, make_obstacle
+    from manip_kin.ros.wire.messages import fill_pose
 
     marker = Marker()
     marker.header.frame_id = args.frame
@@ -200,8 +200,8 @@ def build_marker_array(args: argparse.Namespace, stamp):
 
 def run_obstacle(args: argparse.Namespace) -> int:
     """``manip_kin obstacle add|delete|clear``."""
-    from manip_kin.nodes.scene_messages import TOPIC
     from manip_kin.pipeline import PipelineClient, PipelineError
+    from manip_kin.ros.wire.scene_messages import TOPIC
 
     if not args.timeout > 0:
         raise InvalidArgumentError(f"--timeout {args.timeout}; valid: seconds > 0")

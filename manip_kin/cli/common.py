@@ -8,10 +8,10 @@ import sys
 
 import numpy as np
 
+from manip_kin.core.model import RobotModel
+from manip_kin.core.robots import bundled_robot_names, load_robot
+from manip_kin.core.rotations import make_transform, matrix_to_quat, matrix_to_rpy, quat_to_matrix, rpy_to_matrix
 from manip_kin.errors import InvalidArgumentError, JointCountError, OperationError
-from manip_kin.model import RobotModel
-from manip_kin.robots import bundled_robot_names, load_robot
-from manip_kin.rotations import make_transform, matrix_to_quat, matrix_to_rpy, quat_to_matrix, rpy_to_matrix
 
 
 def add_robot_argument(parser: argparse.ArgumentParser) -> None:
@@ -105,7 +105,7 @@ def robot_from_args(args: argparse.Namespace) -> RobotModel:
 
     A URDF joint without a velocity limit is reported on stderr, once: it is not limited.
     """
-    from manip_kin.urdf import joints_without_velocity_limit
+    from manip_kin.core.urdf import joints_without_velocity_limit
 
     model = load_robot(args.robot, base_link=args.base_link, tip_link=args.tip_link, tool_link=args.tool_link)
     unlimited = joints_without_velocity_limit(model)

@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.cli.common import add_namespace_argument, format_matrix, namespace_from_args
+from manip_kin.core.kinematics import frame_pose, jacobian
+from manip_kin.core.robots import load_robot
+from manip_kin.core.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
 from manip_kin.errors import InvalidArgumentError
-from manip_kin.kinematics import frame_pose, jacobian
 from manip_kin.pipeline.outcome import motion_timing
 from manip_kin.plant import PLANT_NAMES
-from manip_kin.robots import load_robot
-from manip_kin.rotations import make_transform, matrix_to_rpy, rpy_to_matrix
 
 # The genova7 "pose goal" scenario of shared/robots.md.
 GOAL_POSITION = (0.2, -0.7, 0.3)
@@ -110,8 +110,8 @@ def run_demo(args: argparse.Namespace) -> int:
     print(format_matrix(tool_jacobian.linear))
 
     _heading("2/4 control law, offline: resolved-rate simulation of the pose goal")
-    from manip_kin.control import ControllerConfig
-    from manip_kin.simulation import simulate
+    from manip_kin.control.resolved_rate import ControllerConfig
+    from manip_kin.control.simulation import simulate
 
     print(f"goal: {_pose_line(goal_pose)}; gains {GAIN} 1/s; dt 1 ms")
     started = time.perf_counter()
@@ -234,8 +234,8 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
         if summary_code not in (0, None):
             print(f"recorder exited with {summary_code}", file=sys.stderr)
     _heading(f"4/4 the recording: {out}")
-    from manip_kin.plotting import load_run, plot_run
     from manip_kin.recording import read_info
+    from manip_kin.viz.plotting import load_run, plot_run
 
     print(read_info(out).to_text())
     run = load_run(out, namespace=namespace)
@@ -243,7 +243,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
     figures = plot_run(run, plots_dir, title="genova7 demo")
     print(f"plots: {', '.join(str(p) for p in figures)}")
     if run.arm is not None:
-        from manip_kin.arm_animation import write_animation
+        from manip_kin.viz.arm_animation import write_animation
 
         print(f"animation of the arm from /tf: {write_animation(run.arm, plots_dir / 'arm.gif', title='genova7 demo')}")
     else:

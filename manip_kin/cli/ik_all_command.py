@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 
 from manip_kin.cli.common import print_json
-from manip_kin.ik_all import all_ik_solutions, group_wraps
-from manip_kin.model import RobotModel
+from manip_kin.core.model import RobotModel
+from manip_kin.ik.all_solutions import all_ik_solutions, group_wraps
 
 
 def run_ik_all(args: argparse.Namespace, model: RobotModel, target, q0, task: str | None) -> int:

@@ -17,10 +17,10 @@ from manip_kin.cli.common import (
     print_json,
     robot_from_args,
 )
+from manip_kin.core.kinematics import JACOBIAN_KINDS, jacobian, transform_between
+from manip_kin.core.robots import bundled_robot_files, load_robot
 from manip_kin.errors import InvalidArgumentError
-from manip_kin.kinematics import JACOBIAN_KINDS, jacobian, transform_between
-from manip_kin.robots import bundled_robot_files, load_robot
-from manip_kin.sweep import joint_sweep, plot_sweep
+from manip_kin.viz.sweep import joint_sweep, plot_sweep
 
 
 def register(subparsers) -> None:

@@ -20,13 +20,13 @@ from manip_kin.cli.common import (
     robot_from_args,
 )
 from manip_kin.cli.ik_all_command import run_ik_all
-from manip_kin.control import ControllerConfig
+from manip_kin.control.resolved_rate import ControllerConfig
+from manip_kin.control.simulation import simulate
+from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_rows import COMPONENTS, default_task, parse_task
 from manip_kin.errors import InvalidArgumentError
-from manip_kin.ik import DEFAULT_DAMPING, IK_METHODS, solve_ik
-from manip_kin.ik_all import require_closed_form
-from manip_kin.model import RobotModel
-from manip_kin.simulation import simulate
-from manip_kin.tasks import COMPONENTS, default_task, parse_task
+from manip_kin.ik.all_solutions import require_closed_form
+from manip_kin.ik.iterative import DEFAULT_DAMPING, IK_METHODS, solve_ik
 
 _FRAME_HELP = (
     "controlled frame: tool | ee | N (joint frame 1..n) | a link name; default: tool if the robot has one, else ee"

@@ -30,9 +30,9 @@ from manip_kin.cli.common import (
     namespace_from_args,
     print_json,
 )
+from manip_kin.core.model import RobotModel
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint
-from manip_kin.model import RobotModel
+from manip_kin.motion.joint_trajectory import JOINT_TIME_SCALINGS, TrajectoryPoint
 
 _GENERATOR = "trajectory_generator"
 _CONTROLLER = "cartesian_controller"
@@ -89,10 +89,10 @@ def register(subparsers) -> None:
 def _model(args, client) -> RobotModel:
     links = {"base_link": args.base_link, "tip_link": args.tip_link, "tool_link": args.tool_link}
     if args.robot is not None:
-        from manip_kin.robots import load_robot
+        from manip_kin.core.robots import load_robot
 
         return load_robot(args.robot, **links)
-    from manip_kin.urdf import load_urdf_string
+    from manip_kin.core.urdf import load_urdf_string
 
     text = client.robot_description(args.timeout)
     return load_urdf_string(text, source=client.topic("robot_description"), **links)
@@ -140,9 +140,9 @@ def run_move(args: argparse.Namespace) -> int:
 
 
 def _move(args: argparse.Namespace, client) -> int:
-    from manip_kin.nodes.conversions import JointStateMapper
-    from manip_kin.nodes.joint_messages import make_joint_trajectory
     from manip_kin.pipeline import PipelineError
+    from manip_kin.ros.wire.joint_messages import make_joint_trajectory
+    from manip_kin.ros.wire.validation import JointStateMapper
 
     try:
         model = _model(args, client)

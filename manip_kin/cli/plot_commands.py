@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from manip_kin.collision_plot import FIGURE as COLLISION_FIGURE
-from manip_kin.plotting import FIGURES, load_run, plot_run
+from manip_kin.viz.collision_plot import FIGURE as COLLISION_FIGURE
+from manip_kin.viz.plotting import FIGURES, load_run, plot_run
 
 
 def register(subparsers) -> None:
@@ -71,7 +71,7 @@ def run_plot(args: argparse.Namespace) -> int:
     paths += _collision_figure(source, run, out_dir, args)
     print(f"wrote {len(paths)} figures to {out_dir}", file=sys.stderr)
     if args.render:
-        from manip_kin.plant.render import recorded_scene, render_run
+        from manip_kin.viz.physics_render import recorded_scene, render_run
 
         print("rendering 60 frames with MuJoCo ...", file=sys.stderr, flush=True)
         scene = recorded_scene(source, args.namespace)
@@ -79,8 +79,8 @@ def run_plot(args: argparse.Namespace) -> int:
             print(path)
     kind = "gif" if args.gif is not None else "mp4" if args.mp4 is not None else None
     if kind is not None:
-        from manip_kin.arm_animation import write_animation
         from manip_kin.errors import InvalidArgumentError
+        from manip_kin.viz.arm_animation import write_animation
 
         if run.arm is None:
             raise InvalidArgumentError(
@@ -96,8 +96,8 @@ def run_plot(args: argparse.Namespace) -> int:
 
 def _collision_figure(source: Path, run, out_dir: Path, args) -> list[Path]:
     """``collision.png`` when the recording holds the controller's nearest pair; else nothing."""
-    from manip_kin.collision_plot import arm_from_joint_states, load_nearest, plot_collision
-    from manip_kin.plant.render import recorded_scene
+    from manip_kin.viz.collision_plot import arm_from_joint_states, load_nearest, plot_collision
+    from manip_kin.viz.physics_render import recorded_scene
 
     nearest = load_nearest(source, args.namespace)
     if not len(nearest.time):

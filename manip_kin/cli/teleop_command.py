@@ -1,7 +1,7 @@
 """``manip_kin teleop``: drive the arm from the keyboard, in a terminal (works over ssh).
 
 The terminal is put in cbreak mode (keys arrive one by one, not echoed; Ctrl-C still
-signals) and read with ``select``; the keys (:data:`manip_kin.teleop.KEY_HELP`) set the
+signals) and read with ``select``; the keys (:data:`manip_kin.cli.teleop_keys.KEY_HELP`) set the
 velocity, which is streamed at ``--rate`` on ``twist_command`` (twist mode) or ``joint_jog``
 (joint mode) until space or another key. A status line shows the command, the tool pose
 (``tool_pose``), the controller's state (its ``/diagnostics``) and the joint nearest to a
@@ -26,9 +26,9 @@ import tty
 import numpy as np
 
 from manip_kin.cli.common import add_namespace_argument, namespace_from_args
+from manip_kin.cli.teleop_keys import KEY_HELP, TeleopState, apply_key, nearest_limit, status_line
 from manip_kin.cli.teleop_streaming import JOG_TOPIC, TWIST_TOPIC, CommandStream, arm_frames, frames_from_urdf
 from manip_kin.errors import InvalidArgumentError
-from manip_kin.teleop import KEY_HELP, TeleopState, apply_key, nearest_limit, status_line
 
 STATUS_PERIOD_S = 0.1
 # Escape sequences (arrow and function keys) are dropped whole: their letters are not commands.
@@ -151,7 +151,7 @@ class _Teleop:
             self.state = now
 
     def status(self) -> str:
-        from manip_kin.nodes.conversions import pose_stamped_to_matrix
+        from manip_kin.ros.wire.messages import pose_stamped_to_matrix
 
         client, model = self.client, self.frames.model
         pose = pose_stamped_to_matrix(client.tool_pose) if client.tool_pose is not None else None

@@ -70,8 +70,8 @@ def frames_from_urdf(text: str, source: str) -> ArmFrames:
     Raises:
         ModelFileError: the text is not a usable URDF (the message names ``source``).
     """
-    from manip_kin.urdf import load_urdf_string
-    from manip_kin.urdf.document import UrdfTree
+    from manip_kin.core.urdf import load_urdf_string
+    from manip_kin.core.urdf.document import UrdfTree
 
     model = load_urdf_string(text, source=source)
     hint = UrdfTree(text, source).chain_hint

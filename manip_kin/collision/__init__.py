@@ -1,6 +1,6 @@
 """Collision geometry and distances without ROS: a URDF's ``<collision>`` shapes, the
 self-collision pairs (SRDF or sampled), scene obstacles, and per-cycle distances with
-the velocity-damper rows the QP law (:mod:`manip_kin.qp`) takes as a limit.
+the velocity-damper rows the QP law (:mod:`manip_kin.control.qp`) takes as a limit.
 
 * :mod:`~manip_kin.collision.geometry`: shapes on model frames; obstacles as shapes;
 * :mod:`~manip_kin.collision.meshes`: mesh URIs (``package://``, ``file://``) and convex hulls;

@@ -15,10 +15,10 @@ import numpy as np
 from manip_kin.collision.geometry import LinkGeometry, adjacent_links, link_geometries
 from manip_kin.collision.pairs import DEFAULT_SAMPLES, PairSelection, sampled_disabled_pairs, select_pairs
 from manip_kin.collision.srdf import load_disabled_pairs
+from manip_kin.core.model import RobotModel
+from manip_kin.core.robot_files import is_urdf_file
+from manip_kin.core.urdf.document import UrdfTree
 from manip_kin.errors import ModelFileError
-from manip_kin.model import RobotModel
-from manip_kin.robot_files import is_urdf_file
-from manip_kin.urdf.document import UrdfTree
 
 
 @dataclass(frozen=True)

@@ -35,9 +35,9 @@ import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
 from manip_kin.collision.geometry import CollisionShape, frames_and_twists, joint_reach, obstacle_shape, sphere_centres
+from manip_kin.core.model import RobotModel
+from manip_kin.core.scene import Scene
 from manip_kin.errors import ModelFileError
-from manip_kin.model import RobotModel
-from manip_kin.scene import Scene
 
 #: Pairs this far beyond the cutoff [m] are checked every cycle too, so that the others can be
 #: left out for the cycles it takes the joints to spend it (see :meth:`CollisionChecker._near_pairs`).

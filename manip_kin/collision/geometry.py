@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.collision.meshes import convex_vertices, load_convex_mesh, resolve_mesh_uri
+from manip_kin.core.model import RobotModel
+from manip_kin.core.rotations import angle_axis_to_matrix, invert_transform
+from manip_kin.core.scene import Obstacle, ShapeKind
+from manip_kin.core.urdf.document import UrdfJoint, UrdfTree
 from manip_kin.errors import ModelFileError
-from manip_kin.model import RobotModel
-from manip_kin.rotations import angle_axis_to_matrix, invert_transform
-from manip_kin.scene import Obstacle, ShapeKind
-from manip_kin.urdf.document import UrdfJoint, UrdfTree
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ def make_shape(kind: ShapeKind, size, mesh_path: Path | None = None, where: str 
 
 
 def obstacle_shape(obstacle: Obstacle, mesh_search_path: str = "") -> CollisionShape:
-    """The shape of a scene obstacle (marker conventions, see :mod:`manip_kin.scene`).
+    """The shape of a scene obstacle (marker conventions, see :mod:`manip_kin.core.scene`).
 
     Raises:
         ModelFileError: a mesh obstacle whose file cannot be found or read.
@@ -243,12 +243,12 @@ def model_frames(model: RobotModel, q: np.ndarray) -> np.ndarray:
 def frames_and_twists(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Frames 0 (base) .. n in base, shape (n + 1, 4, 4), and the joints' unit twists
     ``[ω; v]`` in base, shape (6, n), at ``q`` (n,) (see
-    :func:`~manip_kin.chain_codegen.generate_frames_source`).
+    :func:`~manip_kin.codegen.chain.generate_frames_source`).
 
     One generated function for all of them: a numpy chain of 4x4 products costs its call
     overhead per frame.
     """
-    from manip_kin.kinematics import compiled_frames
+    from manip_kin.core.kinematics import compiled_frames
 
     n = model.dof
     values = compiled_frames(model)(q.tolist())

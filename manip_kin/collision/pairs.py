@@ -24,7 +24,7 @@ import numpy as np
 
 from manip_kin.collision.geometry import LinkGeometry, model_frames, sphere_centres, sphere_gaps, world_poses
 from manip_kin.collision.srdf import link_pair
-from manip_kin.model import RobotModel
+from manip_kin.core.model import RobotModel
 
 #: A pair in contact in at least this fraction of the samples is "Always" in collision.
 ALWAYS_FRACTION = 0.95

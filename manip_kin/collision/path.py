@@ -8,8 +8,8 @@ import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
 from manip_kin.collision.distances import CollisionChecker, PairDistance
-from manip_kin.model import RobotModel
-from manip_kin.scene import Scene
+from manip_kin.core.model import RobotModel
+from manip_kin.core.scene import Scene
 
 
 class PathCollision(NamedTuple):

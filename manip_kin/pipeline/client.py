@@ -366,7 +366,7 @@ class PipelineClient:
 
     def pose_msg(self, pose: np.ndarray, frame_id: str | None = None):
         """A ``PoseStamped`` of a 4x4 pose stamped now (the stamp identifies it in /diagnostics)."""
-        from manip_kin.nodes.conversions import make_pose_stamped
+        from manip_kin.ros.wire.messages import make_pose_stamped
 
         return make_pose_stamped(pose, frame_id or self.base_frame, self.node.get_clock().now().to_msg())
 
@@ -381,7 +381,7 @@ class PipelineClient:
     def _send_pose_target(self, topic: str, pose: np.ndarray, frame_id: str | None, timeout: float) -> str:
         """Publish ``pose`` stamped now on ``topic`` once delivered; remembered as the newest
         target of ``topic`` (see :meth:`_resend_unreported`); returns its stamp key."""
-        from manip_kin.nodes.conversions import stamp_key
+        from manip_kin.ros.wire.messages import stamp_key
 
         msg = self.pose_msg(pose, frame_id)
         self.publish_delivered(topic, msg, timeout)
@@ -395,7 +395,7 @@ class PipelineClient:
 
     def send_joint_trajectory(self, msg, timeout: float = 10.0) -> str:
         """Stamp a ``JointTrajectory`` now and publish it on ``joint_trajectory``; returns its stamp key."""
-        from manip_kin.nodes.conversions import stamp_key
+        from manip_kin.ros.wire.messages import stamp_key
 
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.publish_delivered("joint_trajectory", msg, timeout)
@@ -557,7 +557,7 @@ class PipelineClient:
                 client sent on ``topic``.
             reported: stamp key the node reports for its current goal or target ('' for none).
         """
-        from manip_kin.nodes.conversions import stamp_key_to_ns
+        from manip_kin.ros.wire.messages import stamp_key_to_ns
 
         sent = self._newest_sent.get(topic)
         if sent is None or sent.stamp != stamp or sent.resends >= GOAL_RESENDS:
@@ -628,7 +628,7 @@ class PipelineClient:
 
     def current_tool_pose(self, timeout: float = 5.0) -> np.ndarray:
         """Newest ``tool_pose`` as a 4x4 pose, waiting for one if needed."""
-        from manip_kin.nodes.conversions import pose_stamped_to_matrix
+        from manip_kin.ros.wire.messages import pose_stamped_to_matrix
 
         self.watch_state()
         self.tool_pose = None

@@ -51,7 +51,7 @@ def taken(values: dict, goal_stamp: str) -> bool:
 def seconds_between(earlier: str, later: str) -> float | None:
     """Seconds from the stamp key ``earlier`` to ``later`` (``sec.nanosec`` texts of the ROS
     clock, as the nodes report them); None when either is missing or not a stamp key."""
-    from manip_kin.nodes.messages import stamp_key_to_ns
+    from manip_kin.ros.wire.messages import stamp_key_to_ns
 
     try:
         return (stamp_key_to_ns(later) - stamp_key_to_ns(earlier)) * 1e-9

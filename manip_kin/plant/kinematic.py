@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from manip_kin.joint_integration import integrate_joint_rates
+from manip_kin.control.integration import integrate_joint_rates
 from manip_kin.plant.outputs import ChainOutputs
 
 

@@ -5,7 +5,7 @@ Bodies follow the robot:
 * **From a URDF** every link below the base link becomes a body placed by its joint's
   origin; the chain's joints move, every other joint (the Panda's fingers) is welded at
   zero. Each link keeps its ``<inertial>`` and its ``<collision>`` shapes (meshes resolved
-  by :func:`manip_kin.meshes.resolve_mesh_uri`; a mesh that cannot be found or that MuJoCo
+  by :func:`manip_kin.core.mesh_uris.resolve_mesh_uri`; a mesh that cannot be found or that MuJoCo
   cannot read, e.g. Collada, is left out and named in the notes). A URDF without any
   ``<inertial>`` gets the default links below; one whose moving link (with the links welded
   to it) has no mass while others have is an error naming that link.
@@ -18,7 +18,7 @@ Bodies follow the robot:
 
 The arm's geoms collide with obstacles only (``contype`` 1, ``conaffinity`` 0 on the arm;
 0 and 1 on obstacles): self-collision is the controller's business, not the plant's.
-Obstacles of a :class:`~manip_kin.scene.Scene` are static geoms of the world body, named
+Obstacles of a :class:`~manip_kin.core.scene.Scene` are static geoms of the world body, named
 ``obstacle NS/ID``. One position servo per joint (:mod:`manip_kin.plant.servo`) is a general
 actuator; its gains are set on the compiled model.
 """
@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
+from manip_kin.core.mesh_uris import resolve_mesh_uri
+from manip_kin.core.model import RobotModel
+from manip_kin.core.rotations import matrix_to_quat
+from manip_kin.core.scene import Scene, ShapeKind
 from manip_kin.errors import ModelFileError
-from manip_kin.meshes import resolve_mesh_uri
-from manip_kin.model import RobotModel
-from manip_kin.rotations import matrix_to_quat
-from manip_kin.scene import Scene, ShapeKind
 
 #: Default link capsule radius [m] (robots without inertials).
 DEFAULT_LINK_RADIUS = 0.04
@@ -67,7 +67,7 @@ class SpecSource:
         model: the robot chain.
         urdf_text: the URDF the model came from, or None (YAML, DH, PoE).
         urdf_dir: directory of the URDF file (relative mesh paths), or None.
-        mesh_search_path: ``:``-separated package directories (see :mod:`manip_kin.meshes`).
+        mesh_search_path: ``:``-separated package directories (see :mod:`manip_kin.core.mesh_uris`).
         notes: what the build left out or assumed, one sentence each (filled by the build).
     """
 
@@ -175,8 +175,8 @@ def _collision_geoms(mujoco, spec, body, shapes, source: SpecSource, link: str) 
 
 
 def _urdf_bodies(mujoco, spec, source: SpecSource, dynamics: JointDynamics) -> None:
+    from manip_kin.core.urdf.document import UrdfTree
     from manip_kin.plant.urdf_links import read_link_dynamics
-    from manip_kin.urdf.document import UrdfTree
 
     model = source.model
     reader = UrdfTree(source.urdf_text, model.source or "robot_description")

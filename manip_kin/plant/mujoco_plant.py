@@ -29,8 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from manip_kin.core.model import RobotModel
+from manip_kin.core.scene import Scene
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.model import RobotModel
 from manip_kin.plant.mujoco_model import (
     OBSTACLE_PREFIX,
     JointDynamics,
@@ -40,7 +41,6 @@ from manip_kin.plant.mujoco_model import (
     urdf_dir_of,
 )
 from manip_kin.plant.outputs import ChainOutputs
-from manip_kin.scene import Scene
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ def urdf_effort_limits(model: RobotModel, urdf_text: str | None) -> list[float]:
     """``<limit effort>`` per model joint [N·m | N]; inf where the URDF gives none or 0 (or there is no URDF)."""
     if urdf_text is None:
         return [math.inf] * model.dof
-    from manip_kin.urdf.document import UrdfTree
+    from manip_kin.core.urdf.document import UrdfTree
 
     joints = {j.name: j for j in UrdfTree(urdf_text, model.source or "robot_description").joints}
     efforts = []

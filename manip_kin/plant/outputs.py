@@ -13,8 +13,8 @@ from operator import mul
 
 import numpy as np
 
-from manip_kin.kinematics import compiled_kinematics
-from manip_kin.model import RobotModel
+from manip_kin.core.kinematics import compiled_kinematics
+from manip_kin.core.model import RobotModel
 
 
 class ChainOutputs:

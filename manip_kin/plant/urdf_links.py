@@ -1,6 +1,6 @@
 """The dynamic parts of a URDF's links: ``<inertial>`` and ``<collision>``, checked field by field.
 
-The kinematic loader (:mod:`manip_kin.urdf`) reads joints only; the physics plant also needs
+The kinematic loader (:mod:`manip_kin.core.urdf`) reads joints only; the physics plant also needs
 each link's mass, centre of mass and inertia, and its collision shapes. Errors are
 :class:`~manip_kin.errors.ModelFileError` naming the source and the field
 (``link[panda_link3]/inertial/mass@value``).
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.urdf.document import UrdfTree
+from manip_kin.core.urdf.document import UrdfTree
 
 
 @dataclass(frozen=True)

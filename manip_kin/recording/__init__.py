@@ -7,12 +7,12 @@
 * :func:`read_info` is ``manip_kin info``; :func:`salvage` recovers a truncated file.
 * :func:`manip_kin.recording.replay.replay` is ``manip_kin replay``.
 
-The recorder node is :mod:`manip_kin.nodes.recorder`.
+The recorder node is :mod:`manip_kin.ros.nodes.recorder`.
 """
 
 from manip_kin.recording.errors import CorruptRecordingError, MessageDefinitionError, RecordingError
 from manip_kin.recording.info import RecordingInfo, read_info
-from manip_kin.recording.messages import RecordedMessage, iter_raw_messages, read_messages
+from manip_kin.recording.reader import RecordedMessage, iter_raw_messages, read_messages
 from manip_kin.recording.salvage import SalvageReport, salvage
 from manip_kin.recording.writer import RecordingSummary, RecordingWriter
 

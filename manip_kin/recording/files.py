@@ -84,8 +84,8 @@ def recording_files(path: str | Path) -> list[Path]:
 
 def _metadata_file_names(metadata_path: Path) -> list[str]:
     """``relative_file_paths`` of a bag's metadata, checked: a list of plain file names."""
+    from manip_kin.core.robot_files import parse_yaml
     from manip_kin.errors import ModelFileError
-    from manip_kin.robot_files import parse_yaml
 
     def refuse(problem: str) -> CorruptRecordingError:
         return CorruptRecordingError(f"{metadata_path}: not rosbag2 metadata: {problem}")

@@ -181,8 +181,8 @@ def _size_on_disk(path: Path) -> int:
 
 def _ros_distro(serialized_metadata: str, file_path: Path) -> str:
     """``ros_distro`` of the rosbag2 metadata record ('' when it has none); YAML within the caps."""
+    from manip_kin.core.robot_files import parse_yaml
     from manip_kin.errors import ModelFileError
-    from manip_kin.robot_files import parse_yaml
 
     try:
         document = parse_yaml(serialized_metadata, f"{file_path} rosbag2 metadata record")

@@ -185,8 +185,8 @@ def parse_profiles(text_or_list: str | Sequence[dict] | None) -> OfferedProfiles
     if not text_or_list:
         return OfferedProfiles()
     if isinstance(text_or_list, str):
+        from manip_kin.core.robot_files import parse_yaml
         from manip_kin.errors import ModelFileError
-        from manip_kin.robot_files import parse_yaml
 
         try:  # a recording's text: parsed within the YAML caps (no alias bombs)
             items = parse_yaml(text_or_list, "offered_qos_profiles")

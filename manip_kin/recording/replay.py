@@ -20,7 +20,7 @@ from typing import Any, TextIO
 
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.info import read_info
-from manip_kin.recording.messages import iter_raw_messages, message_class
+from manip_kin.recording.reader import iter_raw_messages, message_class
 
 NS_PER_S = 1_000_000_000
 VOLATILE_MIN_DEPTH = 100  # a replay burst must not overwrite unacknowledged reliable samples

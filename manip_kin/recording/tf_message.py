@@ -13,8 +13,8 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
+from manip_kin.core.tf_tree import LinkTransform
 from manip_kin.recording.qos import OfferedProfiles, default_offer
-from manip_kin.tf_tree import LinkTransform
 
 TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"

@@ -5,7 +5,7 @@ Foxglove without a placed link. :class:`TfSynthesizer` is fed the recorded messa
 order (by the recorder as they arrive, by :func:`add_tf` for an older file) and returns
 the TF messages the live ``robot_state`` would have published: the fixed joints once on
 ``/tf_static`` per description, and the movable joints on ``/tf`` for the joint states
-that :class:`~manip_kin.tf_tree.StampDecimator` picks at ``rate_hz``, stamped with the
+that :class:`~manip_kin.core.tf_tree.StampDecimator` picks at ``rate_hz``, stamped with the
 joint state's header stamp and written at its receive time.
 
 Pairing: ``NS/joint_states`` goes with ``NS/robot_description`` (same namespace). A joint
@@ -18,8 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from manip_kin.core.tf_tree import LinkTree, StampDecimator, joint_positions, moving_transforms, static_transforms
 from manip_kin.errors import ManipKinError
-from manip_kin.recording.cdr import header_stamp_ns
+from manip_kin.recording.cdr_measure import header_stamp_ns
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.tf_message import (
     TF_MESSAGE_TYPE,
@@ -28,7 +29,6 @@ from manip_kin.recording.tf_message import (
     encode_tf_message,
     tf_offer,
 )
-from manip_kin.tf_tree import LinkTree, StampDecimator, joint_positions, moving_transforms, static_transforms
 
 DEFAULT_TF_RATE_HZ = 50.0
 JOINT_STATES = "joint_states"
@@ -167,7 +167,7 @@ def add_tf(source: str | Path, output: str | Path, rate_hz: float = DEFAULT_TF_R
     """
     from manip_kin.recording.files import recording_files
     from manip_kin.recording.info import read_info
-    from manip_kin.recording.messages import iter_raw_messages
+    from manip_kin.recording.reader import iter_raw_messages
     from manip_kin.recording.writer import RecordingWriter
 
     source, output = Path(source), Path(output)

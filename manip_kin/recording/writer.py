@@ -23,7 +23,7 @@ from mcap.writer import Writer as McapWriter
 
 from manip_kin import __version__
 from manip_kin.recording import metadata as bag_metadata
-from manip_kin.recording.cdr import CdrLayout, header_stamp_ns
+from manip_kin.recording.cdr_measure import CdrLayout, header_stamp_ns
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.msgdef import (
     definitions_from_schema,

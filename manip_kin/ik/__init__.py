@@ -1,0 +1,1 @@
+"""Inverse kinematics: iterative (damped least squares with restarts) and closed form (no ROS)."""

@@ -1,0 +1,438 @@
+"""Straight-line pose trajectories with time scalings, and a check that a line can be tracked.
+
+A line goes from a start pose to a goal pose (4x4, base frame): the position moves along
+the segment, the orientation turns about one fixed axis at a rate proportional to the
+position's progress (the same path as quaternion slerp, computed as
+``R(s) = R0 · exp(s · log(R0ᵀ R1))``). The progress ``s ∈ [0, 1]`` follows a time
+scaling ``s(t)``:
+
+* ``trapezoidal``: accelerate at the acceleration limit, cruise at the velocity limit,
+  decelerate (a triangle when the line is too short to reach the cruise speed);
+* ``cubic`` and ``quintic``: polynomials with zero end velocities (quintic: zero end
+  accelerations too);
+* ``constant``: constant speed from the first instant to the last, velocity jumps at both
+  ends (the irb120 scenario (b): 0.4 m/s along the line).
+
+Every scaling is sized by the same limits: the shortest duration for which the linear
+speed stays at or below ``max_linear_velocity`` [m/s], the angular speed at or below
+``max_angular_velocity`` [rad/s] and, except for ``constant``, the accelerations at or
+below ``max_linear_acceleration`` [m/s²] and ``max_angular_acceleration`` [rad/s²].
+
+Plain numpy: no ROS here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from manip_kin.core.damped_least_squares import damped_least_squares
+from manip_kin.core.kinematics import KinematicsData, forward_kinematics, frame_in_base, geometric_jacobian_from_data
+from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_rows import FULL_TASK, Task, parse_task
+from manip_kin.core.rotations import check_rotation, matrix_to_rotvec, rotvec_to_matrix
+from manip_kin.errors import InvalidArgumentError, check_finite
+
+TIME_SCALINGS = ("trapezoidal", "cubic", "quintic", "constant")
+
+
+@dataclass(frozen=True)
+class MotionLimits:
+    """Cartesian limits that size a time scaling.
+
+    Attributes:
+        max_linear_velocity: [m/s], > 0.
+        max_linear_acceleration: [m/s²], > 0 (not used by ``constant``).
+        max_angular_velocity: [rad/s], > 0.
+        max_angular_acceleration: [rad/s²], > 0 (not used by ``constant``).
+    """
+
+    max_linear_velocity: float = 0.25
+    max_linear_acceleration: float = 0.5
+    max_angular_velocity: float = 0.5
+    max_angular_acceleration: float = 1.0
+
+    def __post_init__(self):
+        for name in (
+            "max_linear_velocity",
+            "max_linear_acceleration",
+            "max_angular_velocity",
+            "max_angular_acceleration",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InvalidArgumentError(f"{name} = {value}; valid: a positive finite number")
+
+
+@dataclass(frozen=True)
+class TimeScaling:
+    """Progress ``s(t)`` from 0 to 1 over ``duration`` seconds.
+
+    Attributes:
+        kind: one of :data:`TIME_SCALINGS`.
+        duration: total time [s], >= 0.
+        ramp_time: acceleration (= deceleration) time of ``trapezoidal`` [s]; 0 otherwise.
+    """
+
+    kind: str
+    duration: float
+    ramp_time: float = 0.0
+
+    def evaluate(self, t: float) -> tuple[float, float, float]:
+        """Progress ``s`` [-], its rate ``ṡ`` [1/s] and ``s̈`` [1/s²] at time ``t`` [s].
+
+        Before 0 the line has not started (s = 0, at rest); after ``duration`` it is
+        finished (s = 1, at rest).
+        """
+        duration = self.duration
+        if duration <= 0.0 or t >= duration:
+            return 1.0, 0.0, 0.0
+        if t <= 0.0:
+            return 0.0, 0.0, 0.0
+        kind = self.kind
+        if kind == "constant":
+            return t / duration, 1.0 / duration, 0.0
+        if kind == "cubic":
+            tau = t / duration
+            return (3.0 - 2.0 * tau) * tau * tau, 6.0 * tau * (1.0 - tau) / duration, (6.0 - 12.0 * tau) / duration**2
+        if kind == "quintic":
+            tau = t / duration
+            tau2 = tau * tau
+            s = tau2 * tau * (10.0 - 15.0 * tau + 6.0 * tau2)
+            sdot = 30.0 * tau2 * (1.0 - tau) ** 2 / duration
+            sddot = 60.0 * tau * (1.0 - 3.0 * tau + 2.0 * tau2) / duration**2
+            return s, sdot, sddot
+        # trapezoidal: peak rate v = 1 / (duration - ramp), acceleration a = v / ramp.
+        ramp = self.ramp_time
+        peak = 1.0 / (duration - ramp)
+        accel = peak / ramp
+        if t < ramp:
+            return 0.5 * accel * t * t, accel * t, accel
+        if t <= duration - ramp:
+            return 0.5 * accel * ramp * ramp + peak * (t - ramp), peak, 0.0
+        remaining = duration - t
+        return 1.0 - 0.5 * accel * remaining * remaining, accel * remaining, -accel
+
+    @property
+    def peak_rate(self) -> float:
+        """Largest ``ṡ`` [1/s] over the motion."""
+        if self.duration <= 0.0:
+            return 0.0
+        return {
+            "constant": 1.0,
+            "cubic": 1.5,
+            "quintic": 1.875,
+            "trapezoidal": self.duration / max(self.duration - self.ramp_time, 1e-300),
+        }[self.kind] / self.duration
+
+
+# Peak ṡ·T and peak |s̈|·T² of the unit polynomials: cubic 6τ(1-τ) peaks at 1.5, its
+# acceleration 6 - 12τ at 6; quintic 30τ²(1-τ)² peaks at 1.875, its acceleration at 10/√3.
+_PEAK_RATE = {"cubic": 1.5, "quintic": 1.875}
+_PEAK_ACCEL = {"cubic": 6.0, "quintic": 10.0 / math.sqrt(3.0)}
+
+
+def make_time_scaling(kind: str, length: float, angle: float, limits: MotionLimits) -> TimeScaling:
+    """The fastest scaling of ``kind`` that keeps a line within ``limits``.
+
+    Args:
+        kind: one of :data:`TIME_SCALINGS`.
+        length: distance travelled by the position [m], >= 0.
+        angle: rotation angle of the orientation [rad], >= 0.
+        limits: velocity and acceleration limits.
+
+    Returns:
+        The scaling; duration 0 for a line of zero length and zero angle.
+    """
+    if kind not in TIME_SCALINGS:
+        raise InvalidArgumentError(f"unknown time scaling {kind!r}; valid: {', '.join(TIME_SCALINGS)}")
+    if not (0.0 <= length < math.inf and 0.0 <= angle < math.inf):
+        raise InvalidArgumentError(f"line of {length} m, {angle} rad; valid: finite, non-negative length and angle")
+    # Largest allowed ṡ and s̈: each Cartesian limit divided by the distance it applies to.
+    rate_limit = min(_ratio(limits.max_linear_velocity, length), _ratio(limits.max_angular_velocity, angle))
+    accel_limit = min(_ratio(limits.max_linear_acceleration, length), _ratio(limits.max_angular_acceleration, angle))
+    if math.isinf(rate_limit):
+        return TimeScaling(kind, 0.0)
+    # A line so long (or limits so small) that the ratios underflow would divide by zero below.
+    if not (rate_limit > 1e-150 and accel_limit > 1e-150):
+        raise InvalidArgumentError(
+            f"line of {length:.6g} m, {angle:.6g} rad cannot be timed within the limits; "
+            "valid: a line whose duration is a finite number of seconds"
+        )
+    if kind == "constant":
+        return TimeScaling(kind, 1.0 / rate_limit)
+    if kind in _PEAK_RATE:
+        duration = max(_PEAK_RATE[kind] / rate_limit, math.sqrt(_PEAK_ACCEL[kind] / accel_limit))
+        return TimeScaling(kind, duration)
+    # Trapezoid: cruise at rate_limit when the ramps leave room, else a triangle.
+    ramp = rate_limit / accel_limit
+    if rate_limit * ramp >= 1.0:
+        ramp = math.sqrt(1.0 / accel_limit)
+        return TimeScaling(kind, 2.0 * ramp, ramp)
+    return TimeScaling(kind, 1.0 / rate_limit + ramp, ramp)
+
+
+def _ratio(limit: float, distance: float) -> float:
+    return math.inf if distance <= 1e-12 else limit / distance
+
+
+@dataclass(frozen=True)
+class LineTrajectory:
+    """A straight-line pose trajectory from ``start`` to ``goal`` in the base frame.
+
+    Attributes:
+        start: start pose, shape (4, 4).
+        goal: goal pose, shape (4, 4).
+        scaling: the time scaling ``s(t)``.
+        displacement: ``p_goal - p_start`` [m], shape (3,).
+        rotation_axis_angle: rotation vector of ``R_startᵀ R_goal`` [rad], in the start frame, shape (3,).
+        angular_direction: the same vector expressed in base [rad], shape (3,).
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    scaling: TimeScaling
+    displacement: np.ndarray = field(init=False, repr=False)
+    rotation_axis_angle: np.ndarray = field(init=False, repr=False)
+    angular_direction: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        start = np.array(self.start, dtype=float)
+        goal = np.array(self.goal, dtype=float)
+        for pose, what in ((start, "start pose"), (goal, "goal pose")):
+            if pose.shape != (4, 4):
+                raise InvalidArgumentError(f"{what} has shape {pose.shape}; valid: (4, 4)")
+            check_finite(pose, what)
+            check_rotation(pose[:3, :3], f"{what} rotation")
+        rotvec = matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])
+        object.__setattr__(self, "start", start)
+        object.__setattr__(self, "goal", goal)
+        object.__setattr__(self, "displacement", goal[:3, 3] - start[:3, 3])
+        object.__setattr__(self, "rotation_axis_angle", rotvec)
+        object.__setattr__(self, "angular_direction", start[:3, :3] @ rotvec)
+
+    @classmethod
+    def plan(cls, start, goal, kind: str = "trapezoidal", limits: MotionLimits = MotionLimits()) -> LineTrajectory:
+        """A line from ``start`` to ``goal`` timed by the fastest ``kind`` scaling within ``limits``."""
+        start = check_finite(start, "start pose")
+        goal = check_finite(goal, "goal pose")
+        for pose, what in ((start, "start pose"), (goal, "goal pose")):
+            if pose.shape != (4, 4):
+                raise InvalidArgumentError(f"{what} has shape {pose.shape}; valid: (4, 4)")
+            check_rotation(pose[:3, :3], f"{what} rotation")
+        with np.errstate(over="ignore"):  # a distance past 1e308 m is inf, which the scaling rejects
+            length = float(np.linalg.norm(goal[:3, 3] - start[:3, 3]))
+        angle = float(np.linalg.norm(matrix_to_rotvec(start[:3, :3].T @ goal[:3, :3])))
+        return cls(start, goal, make_time_scaling(kind, length, angle, limits))
+
+    @property
+    def length(self) -> float:
+        """Distance the position travels [m]."""
+        return float(np.linalg.norm(self.displacement))
+
+    @property
+    def angle(self) -> float:
+        """Angle the orientation turns [rad]."""
+        return float(np.linalg.norm(self.rotation_axis_angle))
+
+    @property
+    def duration(self) -> float:
+        """Total time [s]."""
+        return self.scaling.duration
+
+    def progress_at(self, t: float) -> float:
+        """Progress ``s ∈ [0, 1]`` at time ``t`` [s] from the start."""
+        return self.scaling.evaluate(t)[0]
+
+    def pose_at(self, progress: float) -> np.ndarray:
+        """The pose at progress ``s ∈ [0, 1]``, shape (4, 4)."""
+        pose = np.eye(4)
+        pose[:3, :3] = self.start[:3, :3] @ rotvec_to_matrix(self.rotation_axis_angle * progress)
+        pose[:3, 3] = self.start[:3, 3] + self.displacement * progress
+        return pose
+
+    def sample(self, t: float) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """Pose and twist at time ``t`` [s] from the start.
+
+        Returns:
+            ``(pose, (angular, linear))``: pose in base, shape (4, 4); angular velocity
+            [rad/s] and linear velocity [m/s] w.r.t. base in base, each shape (3,).
+            Before the start and after the end the twist is zero.
+        """
+        s, sdot, _ = self.scaling.evaluate(t)
+        return self.pose_at(s), (self.angular_direction * sdot, self.displacement * sdot)
+
+    def sample_path(self, count: int) -> np.ndarray:
+        """``count`` >= 2 poses evenly spaced in progress from start to goal, shape (count, 4, 4)."""
+        return np.stack([self.pose_at(s) for s in np.linspace(0.0, 1.0, max(int(count), 2))])
+
+    def peak_speeds(self) -> tuple[float, float]:
+        """Largest ``(linear [m/s], angular [rad/s])`` speed over the motion."""
+        rate = self.scaling.peak_rate
+        return self.length * rate, self.angle * rate
+
+
+def distance_to_segment(points, start, end) -> np.ndarray:
+    """Distance [m] of each point to the segment from ``start`` to ``end``.
+
+    Args:
+        points: shape (N, 3) or (3,).
+        start: segment start, shape (3,).
+        end: segment end, shape (3,).
+
+    Returns:
+        Distances, shape (N,) (or a 0-d array for one point).
+    """
+    points = np.asarray(points, dtype=float)
+    start = np.asarray(start, dtype=float)
+    direction = np.asarray(end, dtype=float) - start
+    length_sq = float(direction @ direction)
+    if length_sq < 1e-24:
+        return np.linalg.norm(points - start, axis=-1)
+    fraction = np.clip(((points - start) @ direction) / length_sq, 0.0, 1.0)
+    closest = start + fraction[..., None] * direction
+    return np.linalg.norm(points - closest, axis=-1)
+
+
+# --- can the arm follow the line? --------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ReachReport:
+    """Result of :func:`check_line_reachable`.
+
+    Attributes:
+        reachable: True when every sample of the line was reached within tolerance.
+        progress_reached: largest progress ``s`` [-] up to which every sample was reached.
+        position_error: residual position error at the first failing sample [m] (0 if reachable).
+        orientation_error: residual orientation error there [rad] (0 if reachable).
+        q_end: joint positions at the last reached sample, shape (n,).
+        reason: one line for a log ("" when reachable).
+        progress: the progress of each reached sample, shape (K,).
+        path: the joint positions at each reached sample, shape (K, n).
+    """
+
+    reachable: bool
+    progress_reached: float
+    position_error: float
+    orientation_error: float
+    q_end: np.ndarray
+    reason: str = ""
+    progress: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    path: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+def check_line_reachable(
+    model: RobotModel,
+    line: LineTrajectory,
+    q_start,
+    frame: str | None = None,
+    max_step: float = 0.01,
+    max_angle_step: float = 0.05,
+    position_tolerance: float = 1e-4,
+    orientation_tolerance: float = 1e-3,
+    iterations: int = 30,
+    damping: float = 1e-3,
+    task: Task | str | None = FULL_TASK,
+) -> ReachReport:
+    """Follow the line with a joint-limited damped least-squares IK, from ``q_start`` on.
+
+    Why continuation rather than an IK per sample: a resolved-rate controller tracks the
+    line by moving continuously from the current configuration, so the question is not
+    whether each pose has *some* IK solution, but whether the branch the arm is on reaches
+    every pose without leaving the joint limits. Each sample is solved from the previous
+    sample's solution (a few Newton steps each), which also makes this cheap: a 1 m line
+    takes about 100 samples, a few milliseconds each.
+
+    Args:
+        model: the robot.
+        line: the planned line.
+        q_start: configuration at the start of the line, shape (n,).
+        frame: controlled frame (default: tool if any, else ee).
+        max_step: sample spacing along the position [m].
+        max_angle_step: sample spacing along the orientation [rad].
+        position_tolerance: reached when the position error is below this [m].
+        orientation_tolerance: reached when the orientation error is below this [rad].
+        iterations: Newton steps per sample at most.
+        damping: λ of the damped least squares [-].
+        task: the pose components that must be reached (see :mod:`manip_kin.core.pose_rows`; None = the
+            model's default task); the others are free, e.g. the orientation of a position-only line.
+
+    Returns:
+        A :class:`ReachReport`.
+    """
+    q = model.clip_to_limits(model.check_q(q_start, "q_start"))
+    frame_index = model.frame_index(model.default_frame if frame is None else frame)
+    data = KinematicsData(model)
+    count = max(2, int(math.ceil(max(line.length / max_step, line.angle / max_angle_step))) + 1)
+    count = min(count, 2000)
+    lower, upper = model.lower, model.upper
+    task_of = parse_task(task, model)
+    rows = list(task_of.rows)
+    last_reached = 0.0
+    path = []
+    for s in np.linspace(0.0, 1.0, count):
+        target = line.pose_at(float(s))
+        position_error = orientation_error = math.inf
+        for _ in range(iterations):
+            forward_kinematics(model, data, q)
+            current = data.tool if frame_index == model.dof + 2 else (data.ee if frame_index == model.dof + 1 else None)
+            if current is None:
+                current = frame_in_base(model, data, frame_index)
+            error = np.concatenate(
+                [matrix_to_rotvec(target[:3, :3] @ current[:3, :3].T), target[:3, 3] - current[:3, 3]]
+            )
+            orientation_error, position_error = task_of.error_norms(error[:3], error[3:])
+            if position_error < position_tolerance and orientation_error < orientation_tolerance:
+                break
+            jac = geometric_jacobian_from_data(model, data, frame_index, current[:3, 3])
+            q = _limited_dls_step(jac[rows], error[rows], q, lower, upper, damping)
+        if not (position_error < position_tolerance and orientation_error < orientation_tolerance):
+            reason = (
+                f"line leaves the arm's reach at {100.0 * s:.0f}% of the way "
+                f"(at {np.round(target[:3, 3], 4).tolist()} m): residual {position_error:.4g} m, "
+                f"{orientation_error:.4g} rad within the joint limits (task {task_of.name}); "
+                f"{_why_stuck(model, data, frame_index, q, rows)}"
+            )
+            return ReachReport(False, last_reached, position_error, orientation_error, q, reason)
+        last_reached = float(s)
+        path.append(q.copy())
+    return ReachReport(True, 1.0, 0.0, 0.0, q, "", np.linspace(0.0, 1.0, count), np.array(path))
+
+
+def _why_stuck(model: RobotModel, data: KinematicsData, frame_index: int, q: np.ndarray, rows: list[int]) -> str:
+    """Why the continuation stopped at ``q``: joints at their limits, or a singular arm."""
+    at_limit = [
+        name
+        for name, value, low, high in zip(model.joint_names, q, model.lower, model.upper)
+        if value <= low + 1e-6 or value >= high - 1e-6
+    ]
+    if at_limit:
+        return f"joints at a position limit there: {', '.join(at_limit)}"
+    forward_kinematics(model, data, q)
+    origin = frame_in_base(model, data, frame_index)[:3, 3]
+    jac = geometric_jacobian_from_data(model, data, frame_index, origin)[rows]
+    sigma_min = float(np.linalg.svd(jac, compute_uv=False)[-1]) if jac.shape[0] <= jac.shape[1] else 0.0
+    if sigma_min < 1e-2:
+        return f"the arm is at a singularity there (smallest singular value {sigma_min:.2g}): outside its workspace"
+    return "no configuration within the joint limits continues the line from the arm's current branch"
+
+
+def _limited_dls_step(jac, error, q, lower, upper, damping) -> np.ndarray:
+    """One damped least-squares step, re-solved without joints the limits stop (two passes)."""
+    active = np.ones(q.shape[0], dtype=bool)
+    step = np.zeros_like(q)
+    for _ in range(3):
+        j = jac[:, active]
+        step_active = damped_least_squares(j, error, damping)
+        step[:] = 0.0
+        step[active] = step_active
+        blocked = ((q <= lower + 1e-12) & (step < 0)) | ((q >= upper - 1e-12) & (step > 0))
+        if not np.any(blocked & active):
+            break
+        active &= ~blocked
+        if not np.any(active):
+            break
+    return np.clip(q + step, lower, upper)

@@ -1,1 +1,0 @@
-"""ROS 2 nodes: thin adapters between ROS topics and the numpy core."""

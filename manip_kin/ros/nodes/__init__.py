@@ -1,0 +1,1 @@
+"""The node programs: thin adapters between ROS topics and one core object each."""

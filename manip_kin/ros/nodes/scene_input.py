@@ -1,0 +1,96 @@
+"""What a node with collision checking shares: its collision model and the ``collision_objects`` it polls.
+
+* :func:`node_collision_model`: the robot's collision model from the URDF the node's model
+  came from (the ``robot`` file, or the text on ``robot_description``); a bundled robot or a
+  robot YAML has no geometry and is refused;
+* :class:`SceneInput`: ``collision_objects`` polled by the loop thread, every queued array
+  applied in order (markers are incremental: ADD, DELETE, DELETEALL), refusals logged
+  throttled, and the checker given the scene in the same thread (nothing in a callback touches
+  the scene or the checker).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from visualization_msgs.msg import MarkerArray
+
+from manip_kin.collision.collision_model import CollisionModel, load_collision_model
+from manip_kin.collision.distances import CollisionChecker
+from manip_kin.core.robot_files import is_urdf_file
+from manip_kin.core.scene import Scene
+from manip_kin.errors import InvalidArgumentError
+
+#: Queued ``collision_objects`` arrays kept for the loop (markers are incremental: keep them all).
+SCENE_DEPTH = 50
+
+
+def robot_urdf(params: dict, description_text: str | None, feature: str) -> str | Path:
+    """The URDF the collision geometry comes from: the ``robot`` file, or the description's text.
+
+    Raises:
+        InvalidArgumentError: ``robot`` names a bundled robot or a robot YAML (no geometry).
+    """
+    robot = params["robot"]
+    if not robot:
+        return description_text
+    if Path(robot).is_file() and is_urdf_file(robot):
+        return Path(robot)
+    raise InvalidArgumentError(
+        f"{feature} needs the robot's URDF <collision> geometry; robot {robot!r} is not a URDF file; "
+        "valid: a URDF path, or robot '' (the URDF on robot_description)"
+    )
+
+
+def node_collision_model(node, params: dict, feature: str, samples: int | None = None) -> CollisionModel:
+    """The collision model of ``node.model`` with the node's ``srdf`` and ``mesh_search_path``.
+
+    Raises:
+        ManipKinError: no URDF, a bad SRDF, a mesh not found (the node exits with code 2).
+    """
+    options = {"samples": samples} if samples is not None else {}
+    return load_collision_model(
+        node.model,
+        robot_urdf(params, getattr(node, "robot_description_text", None), feature),
+        srdf=params["srdf"] or None,
+        mesh_search_path=params["mesh_search_path"],
+        **options,
+    )
+
+
+class SceneInput:
+    """``collision_objects`` into a :class:`~manip_kin.core.scene.Scene` and a checker (the loop thread only).
+
+    Args:
+        node: the node (its ``base_frame`` is read each time: obstacles must carry it).
+        checker: the checker that takes the scene.
+        warn: a :class:`~manip_kin.ros.runtime.throttled_log.ThrottledLog`.
+    """
+
+    def __init__(self, node, checker: CollisionChecker, warn):
+        from manip_kin.ros.runtime.polling import PolledSubscription
+        from manip_kin.ros.wire.scene_messages import TOPIC
+
+        self.node = node
+        self.checker = checker
+        self.scene = Scene()
+        self.refused = 0
+        self._warn = warn
+        self.subscription = PolledSubscription(node, MarkerArray, TOPIC, SCENE_DEPTH)
+
+    @property
+    def topic(self) -> str:
+        """The resolved topic name."""
+        return self.subscription.subscription.topic_name
+
+    def take(self) -> None:
+        """Apply every queued array in order; the checker takes the scene if it changed."""
+        from manip_kin.ros.wire.scene_messages import apply_marker_array
+
+        while (msg := self.subscription.take()) is not None:
+            problems = apply_marker_array(self.scene, msg, self.node.base_frame)
+            if problems:
+                self.refused += len(problems)
+                self._warn("collision_objects", f"refused on {self.topic}: {'; '.join(problems)[:400]}")
+        if self.checker.update_scene(self.scene) and self.checker.scene_problems:
+            self._warn("collision_scene", f"obstacles left out: {'; '.join(self.checker.scene_problems)[:400]}")

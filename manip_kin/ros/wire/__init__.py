@@ -1,0 +1,1 @@
+"""Messages on the wire: ROS messages <-> numpy, pre-serialised CDR, validation, topic names."""

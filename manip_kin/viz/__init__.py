@@ -1,0 +1,1 @@
+"""Pictures for a person: figures of a recorded run, animations, sweeps, markers and the live view's feed."""

@@ -1,0 +1,147 @@
+"""The command filter: every output obeys the acceleration and jerk limits cycle to cycle."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from manip_kin.control.command_filter import CommandFilter, FilterResult
+from manip_kin.control.joint_limits import JointLimit, JointLimits, default_joint_limits, stopping_distance
+from manip_kin.core.robots import load_robot
+
+DT = 0.001
+SLACK = 1e-9  # relative: ruckig's samples sit on the bounds up to rounding
+
+
+def finite_differences(commands: np.ndarray, dt: float = DT) -> tuple[np.ndarray, np.ndarray]:
+    """(accelerations, jerks) of a command stream, from rest before the first command."""
+    stream = np.vstack([np.zeros((2, commands.shape[1])), commands])
+    acceleration = np.diff(stream, axis=0) / dt
+    return acceleration[1:], np.diff(acceleration, axis=0) / dt
+
+
+def assert_within(commands, limits: JointLimits, dt: float = DT) -> None:
+    acceleration, jerk = finite_differences(np.asarray(commands), dt)
+    assert np.all(np.abs(acceleration) <= limits.acceleration * (1 + SLACK) + 1e-12), np.abs(acceleration).max(axis=0)
+    assert np.all(np.abs(jerk) <= limits.jerk * (1 + SLACK) + 1e-9), np.abs(jerk).max(axis=0)
+
+
+def irb120():
+    return load_robot("irb120")
+
+
+def test_a_velocity_step_becomes_a_jerk_limited_ramp():
+    model = irb120()
+    limits = JointLimits.of(model)
+    command_filter = CommandFilter(limits, model.lower, model.upper, DT)
+    target = 0.9 * limits.velocity
+    commands = [list(command_filter.update(target)) for _ in range(1000)]
+    assert_within(commands, limits)
+    # Independently of ruckig: from rest, the fastest jerk-limited rise to v takes v/A + A/J.
+    rise = max(v / a + a / j for v, a, j in zip(target, limits.acceleration, limits.jerk))
+    first_at_target = next(k for k, c in enumerate(commands) if np.allclose(c, target, rtol=0, atol=1e-12))
+    assert rise <= (first_at_target + 1) * DT <= 1.3 * rise + 2 * DT
+    assert command_filter.result is FilterResult.FOLLOWING
+    # The first command is half a cycle of jerk: J dt² / 2 on the joint whose rise is longest.
+    assert 0 < abs(commands[0][0]) < target[0]
+
+
+def test_the_stop_ends_in_an_exact_zero_within_the_stopping_time_bound():
+    model = irb120()
+    limits = JointLimits.of(model)
+    command_filter = CommandFilter(limits, model.lower, model.upper, DT)
+    for _ in range(500):
+        command_filter.update(-0.8 * limits.velocity)
+    bound = command_filter.stopping_time()
+    commands = []
+    while not command_filter.at_rest and len(commands) < 10_000:
+        commands.append(list(command_filter.update(np.zeros(model.dof))))
+    assert commands[-1] == [0.0] * model.dof
+    assert len(commands) * DT <= bound + DT
+    assert len(commands) * DT >= max(0.8 * v / a for v, a in zip(limits.velocity, limits.acceleration))
+    assert command_filter.result is FilterResult.AT_REST
+
+
+def test_deceleration_limit_below_acceleration_limit_bounds_both():
+    model = irb120()
+    per_joint = default_joint_limits(model)
+    per_joint["joint1"] = JointLimit(True, 4.0, True, 20.0, True, 5.0, True, 1000.0)
+    limits = JointLimits.of(model, per_joint)
+    assert limits.acceleration[0] == 5.0
+    with pytest.raises(ValueError, match=r"joint_limits\.joint1\.max_jerk = -1.*valid"):
+        JointLimits.of(model, {"joint1": JointLimit(True, 4.0, True, 20.0, True, 5.0, True, -1.0)})
+    with pytest.raises(ValueError, match="not a joint of irb120"):
+        JointLimits.of(model, {"elbow": per_joint["joint1"]})
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.05, 0.5, 2.0])
+@pytest.mark.parametrize("acceleration", [-8.0, 0.0, 6.0])
+def test_stopping_distance_matches_a_simulated_time_optimal_stop(speed, acceleration):
+    bound, jerk, dt = 10.0, 500.0, 1e-6
+    v, a, travelled = speed, acceleration, 0.0
+    while v > 0.0 or a > 0.0:  # jerk -J, until easing off at +J lands on v = 0 with a = 0
+        j = jerk if a < 0.0 and v - a * a / (2 * jerk) <= 0.0 else -jerk
+        a = min(max(a + j * dt, -bound), bound)
+        v += a * dt
+        travelled += max(v, 0.0) * dt
+        if v <= 0.0:
+            break
+    assert stopping_distance(speed, acceleration, bound, jerk) == pytest.approx(travelled, rel=2e-3, abs=1e-7)
+
+
+@settings(max_examples=40)
+@given(
+    st.lists(
+        st.tuples(st.integers(1, 300), st.lists(st.floats(-1.5, 1.5), min_size=6, max_size=6)),
+        min_size=1,
+        max_size=6,
+    ),
+    st.floats(0.5, 50.0),
+    st.floats(0.01, 0.5),
+)
+def test_any_target_sequence_keeps_the_limits(segments, acceleration_factor, jerk_time):
+    """Goal sequences, reversals and limits: the finite differences stay within the limits, the
+    commands within the velocity limits, and a held target is reached."""
+    model = irb120()
+    per_joint = {
+        name: JointLimit(True, v, True, acceleration_factor * v, False, 1.0, True, acceleration_factor * v / jerk_time)
+        for name, v in zip(model.joint_names, model.velocity_limits)
+    }
+    limits = JointLimits.of(model, per_joint)
+    command_filter = CommandFilter(limits, model.lower, model.upper, DT)
+    commands = []
+    for cycles, fractions in segments:
+        target = np.array(fractions) * limits.velocity
+        commands += [list(command_filter.update(target)) for _ in range(cycles)]
+    state = command_filter.state
+    change_time = limits.stopping_time(state.velocity - target, state.acceleration)  # a change of speed is a stop
+    settle = int(math.ceil(change_time / DT)) + 2
+    commands += [list(command_filter.update(target)) for _ in range(2 * settle)]
+    assert_within(commands, limits)
+    assert np.all(np.abs(commands) <= limits.velocity * (1 + SLACK))
+    scale = min(1.0, float(np.min(limits.velocity / np.maximum(np.abs(target), 1e-300))))
+    np.testing.assert_allclose(commands[-1], scale * target, rtol=0, atol=1e-9)
+
+
+@settings(max_examples=30)
+@given(st.floats(-2.8, 2.8), st.floats(0.2, 1.0))
+def test_a_joint_driven_at_its_limit_stops_on_it(start, speed_fraction):
+    """The braking speed keeps the filtered command from carrying a joint past its limit."""
+    model = irb120()
+    limits = JointLimits.of(model)
+    command_filter = CommandFilter(limits, model.lower, model.upper, DT)
+    q = np.zeros(model.dof)
+    q[0] = start
+    commands = []
+    cycles = int((model.upper[0] - start) / (speed_fraction * limits.velocity[0]) / DT) + 1000
+    for _ in range(cycles):
+        target = np.zeros(model.dof)
+        target[0] = speed_fraction * limits.velocity[0]
+        command = command_filter.update(target, q)
+        commands.append(list(command))
+        q = q + np.array(command) * DT
+        assert q[0] <= model.upper[0] + 1e-9
+    assert_within(commands, limits)
+    assert q[0] > model.upper[0] - 0.01  # it got there
