@@ -33,7 +33,7 @@ def _candidate_config_dirs() -> list[Path]:
                 pass
         except ImportError:
             pass
-    candidates.append(Path(__file__).resolve().parent.parent / "config")
+    candidates.append(Path(__file__).resolve().parents[2] / "config")  # the source tree: manip_kin/core/ -> repo
     candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config")
     return candidates
 
