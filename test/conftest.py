@@ -19,6 +19,14 @@ from manip_kin.pipeline import pick_free_domain
 from manip_kin.pipeline.domain import use_prompt_acknowledgements
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+TEST_ROOT = Path(__file__).resolve().parent
+
+# Test modules import the shared helpers of test/support/ (node_harness, ...) and, in a few places,
+# another wing's test module (test_closed_form's robots) by module name: every test folder is on
+# sys.path whichever file runs first. Basenames are unique across folders (test_layout checks it).
+for _folder in sorted({TEST_ROOT / "support", *(p.parent for p in TEST_ROOT.rglob("test_*.py"))}, reverse=True):
+    if str(_folder) not in sys.path:
+        sys.path.insert(0, str(_folder))
 
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

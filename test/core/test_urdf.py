@@ -22,7 +22,7 @@ from manip_kin.core.model import Joint, JointType, RobotModel
 from manip_kin.core.urdf import load_urdf, load_urdf_string, model_to_urdf
 from manip_kin.errors import ModelFileError
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 SMALL_ARM = DATA / "small_arm.urdf"
 PANDA = "panda_description/urdf/panda.urdf"
 UR5 = "ur_description/urdf/ur5_robot.urdf"

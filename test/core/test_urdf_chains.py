@@ -22,7 +22,7 @@ from manip_kin.core.urdf import joints_without_velocity_limit, load_urdf, load_u
 from manip_kin.errors import InvalidArgumentError, ModelFileError
 from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper
 
-TWO_ARMS = Path(__file__).parent / "data" / "two_arms.urdf"
+TWO_ARMS = Path(__file__).resolve().parents[1] / "data" / "two_arms.urdf"
 
 
 def _rz(a):

@@ -11,7 +11,7 @@ from pipeline_checks import checked_pipeline
 
 from manip_kin.pipeline import pipeline_processes
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

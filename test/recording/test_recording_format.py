@@ -49,7 +49,7 @@ from manip_kin.recording.msgdef import (
 )
 from manip_kin.recording.qos import default_offer, parse_profiles
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 # The console scripts of the interpreter running the tests (the venv make uses, or any other).
 SCRIPTS = Path(sysconfig.get_path("scripts"))
 MANIP_KIN = SCRIPTS / "manip_kin"
@@ -460,7 +460,7 @@ def test_benchmark_writer_reports_cost_per_message():
     # The bench code lives under bench/, outside the package.
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("bench_recorder", Path(__file__).parents[1] / "bench" / "recorder.py")
+    spec = importlib.util.spec_from_file_location("bench_recorder", Path(__file__).parents[2] / "bench" / "recorder.py")
     bench_recorder = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench_recorder)
     result = bench_recorder.benchmark_writer(300)

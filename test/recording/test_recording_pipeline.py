@@ -273,7 +273,7 @@ def test_recording_without_live_tf_gains_tf_that_composes_to_the_tool_pose(recor
 def test_foxglove_layout_names_only_recorded_topics(recorded_run):
     import json
 
-    layout = json.loads((Path(__file__).resolve().parents[1] / "config" / "foxglove_layout.json").read_text())
+    layout = json.loads((Path(__file__).resolve().parents[2] / "config" / "foxglove_layout.json").read_text())
     recorded = {t.name for t in read_info(recorded_run[0]).topics}
     panels = layout["configById"]
     used = set(panels["3D!arm"]["topics"])

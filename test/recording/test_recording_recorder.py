@@ -24,7 +24,7 @@ from std_msgs.msg import String
 
 from manip_kin.recording import read_info
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 # The console scripts of the interpreter running the tests (the venv make uses, or any other).
 SCRIPTS = Path(sysconfig.get_path("scripts"))
 RECORDER = SCRIPTS / "recorder"

@@ -31,7 +31,7 @@ from std_msgs.msg import String
 from manip_kin.recording import RecordingWriter
 from manip_kin.recording.qos import default_offer
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 # The console scripts of the interpreter running the tests (the venv make uses, or any other).
 SCRIPTS = Path(sysconfig.get_path("scripts"))
 MANIP_KIN = SCRIPTS / "manip_kin"

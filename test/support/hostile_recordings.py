@@ -245,7 +245,7 @@ def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | N
 
 def main(out: str, examples: int) -> None:
     limit_this_process()
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "recording"))  # a subprocess: no conftest
     from test_recording_format import write_recording
 
     from manip_kin.recording import read_info

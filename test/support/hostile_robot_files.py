@@ -26,7 +26,7 @@ from pathlib import Path
 
 from bounded_cli import first_failure, limit_this_process, one_line_refusal_problem, run_cli, save_progress
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 HOSTILE_NUMBERS = [
     ".inf",
     "-.inf",

@@ -10,7 +10,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-CLIENT_DIR = Path(__file__).resolve().parent / "foxglove_client"
+CLIENT_DIR = Path(__file__).resolve().parents[1] / "foxglove_client"
 
 
 def ensure_installed() -> Path:

@@ -71,7 +71,7 @@ def record(out_dir: Path) -> Path:
 
 def main() -> int:
     target = (
-        Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[1] / "docs" / "collision_run.png"
+        Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "docs" / "collision_run.png"
     )
     with tempfile.TemporaryDirectory() as directory:
         recording = record(Path(directory))
