@@ -133,7 +133,10 @@ def planar_two_link(first, second, target, first_hint: float = 0.0) -> list[tupl
     if abs(cos_relative) > 1.0 + REACH_SLACK:
         return []
     cos_relative = min(1.0, max(-1.0, cos_relative))
-    sin_relative = math.sqrt(max(0.0, 1.0 - cos_relative * cos_relative))
+    # sin² = (1 - cos)(1 + cos) from the distances themselves: 1 - cos² cancels to nothing near
+    # stretched or folded, where the target's last nanometres would be lost (elbow off by ~1e-8 rad).
+    sin_sq = ((l1 + l2) ** 2 - distance_sq) * (distance_sq - (l1 - l2) ** 2) / (2.0 * l1 * l2) ** 2
+    sin_relative = math.sqrt(max(0.0, min(1.0, sin_sq)))
     relative_at_zero = math.atan2(second[1], second[0]) - math.atan2(first[1], first[0])
     solutions = []
     for side in (1, -1):
