@@ -1,4 +1,4 @@
-"""The fixed-rate loop every manip_kin node runs (the node base class is in ``looping_node``).
+"""The fixed-rate loop every manip_kin node runs (the node base class, :class:`~manip_kin.ros.runtime.looping_node.LoopingNode`, runs one).
 
 Why not an rclpy timer: measured here, an *empty* rclpy timer callback at 1 kHz costs
 about 42 % of a core (the Python executor rebuilds its wait set on every wake-up), and
@@ -543,12 +543,3 @@ def stats_key_values(stats: LoopStats) -> list[tuple[str, str]]:
         ("loop_stalls", str(stats.stalls)),
         ("loop_longest_cycle_ms", f"{stats.longest_cycle_ms:.3f}"),
     ]
-
-
-def __getattr__(name: str):
-    # The node base class lives in looping_node (it imports this module); nodes import it from here.
-    if name in ("LoopingNode", "LoopGaveUpError"):
-        from manip_kin.ros.runtime import looping_node
-
-        return getattr(looping_node, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
