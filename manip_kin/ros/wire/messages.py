@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.core.rotations import matrix_to_quat
-from manip_kin.ros.wire.validation import InvalidMessageError
+from manip_kin.ros.wire.validation import QUATERNION_TOLERANCE, InvalidMessageError, pose_problem
 
 _NS_PER_S = 1_000_000_000
 
@@ -197,3 +197,13 @@ def array_to_multiarray(values, msg: Float64MultiArray | None = None) -> Float64
 def multiarray_to_array(msg: Float64MultiArray) -> np.ndarray:
     """The data of a ``Float64MultiArray`` as a float64 vector (a copy), shape (len,)."""
     return np.array(msg.data, dtype=float)
+
+
+def check_pose_stamped(
+    msg: PoseStamped, base_frame: str, what: str = "pose", quaternion_tolerance: float = QUATERNION_TOLERANCE
+) -> np.ndarray:
+    """The pose of a valid ``PoseStamped`` as a 4x4 transform, or :class:`InvalidMessageError`."""
+    problem = pose_problem(msg, base_frame, what, quaternion_tolerance)
+    if problem is not None:
+        raise InvalidMessageError(problem)
+    return pose_stamped_to_matrix(msg)

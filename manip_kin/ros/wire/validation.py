@@ -229,16 +229,6 @@ def _raise_if(problem: str | None) -> None:
         raise InvalidMessageError(problem)
 
 
-def check_pose_stamped(
-    msg: PoseStamped, base_frame: str, what: str = "pose", quaternion_tolerance: float = QUATERNION_TOLERANCE
-) -> np.ndarray:
-    """The pose of a valid ``PoseStamped`` as a 4x4 transform, or :class:`InvalidMessageError`."""
-    from manip_kin.ros.wire.messages import pose_stamped_to_matrix
-
-    _raise_if(pose_problem(msg, base_frame, what, quaternion_tolerance))
-    return pose_stamped_to_matrix(msg)
-
-
 def check_command(msg: Float64MultiArray, dof: int, what: str = "joint velocity command") -> np.ndarray:
     """The data of a valid command as a vector of shape (dof,), or :class:`InvalidMessageError`."""
     values = np.array(msg.data, dtype=float)
