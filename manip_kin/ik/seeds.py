@@ -74,9 +74,9 @@ class SeedTable:
         """Pose distance of every entry to ``goal`` (4x4 nested lists), up to a constant;
         :meth:`pop_nearest` takes entries from it, nearest first."""
         _, features, half_norms, weights = self._built()
-        target = np.array(
-            [goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]], dtype=np.float32
-        )
+        target = np.array([goal[0][3], goal[1][3], goal[2][3], *goal[0][:3], *goal[1][:3], *goal[2][:3]])
+        # A goal beyond float32's range (3e38 m) ranks as one 1e18 m away: far from every entry alike.
+        target = np.clip(target, -1e18, 1e18).astype(np.float32)
         # ½|f - t|² - ½|t|²: one matrix-vector product ranks the table.
         return half_norms - features @ (target * weights)
 
