@@ -136,6 +136,7 @@ def run_info(args: argparse.Namespace) -> int:
 
 def run_replay(args: argparse.Namespace) -> int:
     """``manip_kin replay``."""
+    from manip_kin.pipeline.domain import use_prompt_acknowledgements
     from manip_kin.recording.replay import ReplayOptions, parse_remaps, replay
 
     remaps = parse_remaps(args.remap)
@@ -151,6 +152,7 @@ def run_replay(args: argparse.Namespace) -> int:
         wait_for_subscribers_s=max(0.0, args.wait_for_subscribers),
         add_tf=args.add_tf,
     )
+    use_prompt_acknowledgements()  # a player wants its last samples acknowledged before it exits
     report = replay(args.file, options, progress=None if args.quiet else sys.stderr)
     print(
         f"replayed {report.messages_published} messages on {len(report.topic_counts)} topics "

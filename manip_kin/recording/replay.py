@@ -180,9 +180,6 @@ def replay(
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from manip_kin.pipeline.domain import use_prompt_acknowledgements
-
-    use_prompt_acknowledgements()  # a player wants its last samples acknowledged before it exits
     context = rclpy.Context()
     # No rclpy signal handlers: Ctrl-C stays a KeyboardInterrupt that ends the loop at once.
     rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
@@ -218,8 +215,8 @@ def replay(
         )
         for publisher in publishers.values():
             # Reliable samples still in flight would be lost if the process exited now. Acks come
-            # at the writers' heartbeat (20 ms here, use_prompt_acknowledgements); the wait stays
-            # short where a caller's own profile keeps Fast DDS's 3 s.
+            # at the writers' heartbeat (20 ms for `manip_kin replay`, whose process has the
+            # client profile; Fast DDS's default 3 s otherwise): the wait stays short.
             publisher.wait_for_all_acked(_duration(ACK_WAIT_S))
         return report
     finally:
