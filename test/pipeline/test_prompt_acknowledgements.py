@@ -68,8 +68,9 @@ def test_a_delivered_message_is_acknowledged_before_fast_dds_default_heartbeat()
 
     # The node process must not get the profile: the writer's side alone decides.
     reader = subprocess.Popen([sys.executable, "-c", _SUBSCRIBER], env=node_environment(os.environ))
-    client = PipelineClient()
+    client = None
     try:
+        client = PipelineClient()
         client.publish_delivered("acknowledged", String(data="first"), timeout=20.0)
         waits = []
         for index in range(3):
@@ -81,6 +82,8 @@ def test_a_delivered_message_is_acknowledged_before_fast_dds_default_heartbeat()
         # on a loaded machine.
         assert min(waits) < 1.0, waits
     finally:
-        client.close()
-        reader.terminate()
+        if client is not None:
+            client.close()
+        # SIGKILL: a SIGTERM that lands while rclpy installs its handlers can leave spin() waiting.
+        reader.kill()
         reader.wait(timeout=10)
