@@ -162,14 +162,16 @@ def stream_for(client, send, duration: float, rate_hz: float) -> float:
     """Call ``send()`` at ``rate_hz`` for ``duration`` seconds (spinning meanwhile); the seconds streamed."""
     start = time.monotonic()
     period = 1.0 / rate_hz
-    count = 0
+    next_send = start
     while True:
         now = time.monotonic()
         if now - start >= duration:
             return now - start
         send()
-        count += 1
-        client.spin_for(max(0.0, start + count * period - time.monotonic()))
+        # Behind schedule (a stalled process), the stream goes on at its rate from now: no burst
+        # of the missed periods' messages.
+        next_send = max(next_send + period, time.monotonic())
+        client.spin_for(max(0.0, next_send - time.monotonic()))
 
 
 def _positive(value: float, flag: str, unit: str) -> None:

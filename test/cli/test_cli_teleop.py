@@ -339,3 +339,27 @@ def test_teleop_ctrl_c_stops_the_arm_and_restores_the_terminal(controller, termi
     assert _on(controller, "twist_command")[-1].twist.linear.y == 0.0
     assert _on(controller, "stop") == [None]
     assert termios.tcgetattr(tty.master) == tty.settings
+
+
+def test_a_stalled_stream_resumes_at_its_rate_without_a_burst(monkeypatch):
+    from manip_kin.cli import teleop_streaming
+
+    clock = [100.0]
+    monkeypatch.setattr(teleop_streaming.time, "monotonic", lambda: clock[0])
+
+    class StallingClient:
+        spins = 0
+
+        def spin_for(self, seconds):
+            self.spins += 1
+            clock[0] += seconds + (0.3 if self.spins == 5 else 0.0)  # one 0.3 s stall
+
+    sent = []
+    streamed = teleop_streaming.stream_for(StallingClient(), lambda: sent.append(clock[0]), 1.0, 40.0)
+    gaps = np.diff(sent)
+    assert streamed == pytest.approx(1.0, abs=0.03)
+    # 40 Hz apart, but for the stall and the one message sent at once after it.
+    assert np.count_nonzero(np.abs(gaps - 0.025) > 1e-9) == 2, gaps
+    assert gaps.max() == pytest.approx(0.325) and gaps.min() == pytest.approx(0.0)
+    # 5 sends before the stall (0 to 0.1 s), 2 at 0.425 s, then every 25 ms below 1 s.
+    assert len(sent) == 5 + 2 + len(np.arange(0.45, 1.0 - 1e-9, 0.025))

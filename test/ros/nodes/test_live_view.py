@@ -295,7 +295,7 @@ def test_bad_parameter_and_a_taken_port_are_one_line_errors():
 
     executable = str(Path(sys.executable).parent / "live_view")
     bad = subprocess.run([executable, "--ros-args", "-p", "port:=-1"], capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and bad.stderr.strip() == "error: parameter port = -1; valid: >= 0"
+    assert bad.returncode == 2 and bad.stderr.strip() == "error: parameter port = -1; valid: 0 to 65535"
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
