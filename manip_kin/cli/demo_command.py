@@ -216,11 +216,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
                 if status is not None
                 else "no status"
             )
-            verdict = (
-                f"converged ({timing.text('line')})"
-                if converged and timing.settled_s is not None
-                else f"{'converged' if converged else 'NOT converged'} in {took:.2f} s"
-            )
+            verdict = timing.converged_verdict("line", took) if converged else f"NOT converged in {took:.2f} s"
             print(f"  {verdict}; final error {errors}", flush=True)
             exit_code = exit_code or (0 if converged else 1)
         tool_now = client.current_tool_pose()

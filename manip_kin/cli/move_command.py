@@ -204,16 +204,12 @@ def _await(args, client, stamp: str, start: float, payload: dict, summary: str) 
     payload.update(
         converged=converged,
         time=elapsed,
-        motion_time=timing.motion_s,
-        settle_time=timing.settled_s if converged else None,
-        settle_tolerance=timing.tolerance,
+        **timing.fields(converged),
         final_error=errors,
         state=status.message if status else None,
     )
-    if converged and timing.settled_s is not None:
-        verdict = f"converged ({timing.text('move')})"
-    elif converged:  # a controller that does not report when it settled
-        verdict = f"converged in {elapsed:.2f} s"
+    if converged:
+        verdict = timing.converged_verdict("move", elapsed)
     else:
         verdict = f"NOT converged after {elapsed:.2f} s"
     if errors["joint"] is None:

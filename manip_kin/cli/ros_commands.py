@@ -188,16 +188,12 @@ def _await_convergence(
         outcome=outcome.word or "timeout",
         reason=outcome.reason,
         time=elapsed,
-        motion_time=timing.motion_s,
-        settle_time=timing.settled_s if converged else None,
-        settle_tolerance=timing.tolerance,
+        **timing.fields(converged),
         final_error=errors,
         state=status.message if status else None,
     )
-    if converged and timing.settled_s is not None:
-        verdict = f"converged ({timing.text(label)})"
-    elif converged:  # a controller that does not report when it settled
-        verdict = f"converged in {elapsed:.2f} s"
+    if converged:
+        verdict = timing.converged_verdict(label, elapsed)
     elif outcome.word:
         verdict = f"{outcome.word} after {elapsed:.2f} s ({outcome.reason})"
     else:

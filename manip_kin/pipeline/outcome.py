@@ -83,6 +83,21 @@ class MotionTiming:
             parts.append(f"settled within {self.tolerance} after {self.settled_s:.2f} s")
         return "; ".join(parts)
 
+    def fields(self, converged: bool) -> dict:
+        """The ``--json`` keys: ``motion_time``, ``settle_time`` (None unless converged), ``settle_tolerance``."""
+        return {
+            "motion_time": self.motion_s,
+            "settle_time": self.settled_s if converged else None,
+            "settle_tolerance": self.tolerance,
+        }
+
+    def converged_verdict(self, motion: str, elapsed: float) -> str:
+        """The line of a converged goal: its motion's end and settling where the controller
+        reported them, else the ``elapsed`` seconds [s] until it said converged."""
+        if self.settled_s is not None:
+            return f"converged ({self.text(motion)})"
+        return f"converged in {elapsed:.2f} s"
+
 
 def motion_timing(start_stamp: str, controller: dict, generator: dict | None = None) -> MotionTiming:
     """The timing of a goal sent at ``start_stamp`` (``generator`` None) or of a generator's

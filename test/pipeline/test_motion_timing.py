@@ -88,3 +88,16 @@ def test_a_goal_is_timed_from_its_stamp_and_a_joint_move_by_its_joint_tolerance(
     position_only = motion_timing("1.000000000", {"task": "position", "position_tolerance": "0.001"})
     assert position_only.settled_s is None and position_only.tolerance == "0.001 m"
     assert position_only.text() == ""  # not settled, no motion: nothing to say
+
+
+def test_the_verdict_and_json_fields_say_the_end_and_settling_where_known():
+    from manip_kin.pipeline.outcome import MotionTiming
+
+    known = MotionTiming(motion_s=2.5, settled_s=3.125, tolerance="0.0001 m / 0.001 rad")
+    assert known.converged_verdict("line", 9.42) == (
+        "converged (line ended after 2.50 s; settled within 0.0001 m / 0.001 rad after 3.12 s)"
+    )
+    assert known.fields(True) == {"motion_time": 2.5, "settle_time": 3.125, "settle_tolerance": "0.0001 m / 0.001 rad"}
+    assert known.fields(False)["settle_time"] is None
+    unknown = MotionTiming(motion_s=None, settled_s=None, tolerance="")
+    assert unknown.converged_verdict("move", 9.424) == "converged in 9.42 s"
