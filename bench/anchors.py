@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
+sys.path.insert(0, str(HERE.parent / "test" / "support"))  # robot_data_files: the example-robot-data URDFs
 
 
 # --- the robots in each library ---------------------------------------------------------------

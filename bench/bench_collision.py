@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))  # collision_robots
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test" / "support"))  # collision_robots
 
 GOAL_OFFSETS = ((0.25, 0.0, -0.1), (0.0, 0.35, 0.0), (0.1, -0.3, -0.25), (-0.1, 0.2, 0.15))
 STEPS_PER_GOAL = 1500

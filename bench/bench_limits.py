@@ -423,7 +423,7 @@ def run_limits_benchmarks(rounds: int = 2) -> list[dict]:
 
 
 if __name__ == "__main__":
-    sys.path.insert(1, str(__import__("pathlib").Path(__file__).resolve().parent.parent / "test"))
+    sys.path.insert(1, str(__import__("pathlib").Path(__file__).resolve().parent.parent / "test" / "support"))
     part = sys.argv[1] if len(sys.argv) > 1 else ""
     chosen = {"filter": lambda: filter_rows() + offline_rows(), "nodes": node_rows}.get(part, run_limits_benchmarks)
     json.dump(chosen(), sys.stdout, indent=1)

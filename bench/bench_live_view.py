@@ -13,7 +13,6 @@ so that the machine's drift falls on all of them.
 from __future__ import annotations
 
 import json
-import socket
 import tempfile
 import time
 
@@ -21,13 +20,6 @@ import numpy as np
 from bench_nodes import _cpu_seconds
 
 LIVE_VIEW_PORT = 18765
-
-
-def _stalled_client(port: int) -> socket.socket:
-    # The same silent client as test/ros/nodes/test_live_view.py's.
-    from test_live_view import _stalled_client as connect
-
-    return connect(port)
 
 
 def _rss_mib(pid: int) -> float:
@@ -38,10 +30,10 @@ def _rss_mib(pid: int) -> float:
 
 
 def _window(pipeline, client, seconds: float, reader: bool, stalled: bool) -> dict:
-    from live_view_client import start_client
+    from live_view_client import stalled_client, start_client
 
     pid = pipeline.pid("live_view")
-    silent = _stalled_client(LIVE_VIEW_PORT) if stalled else None
+    silent = stalled_client(LIVE_VIEW_PORT) if stalled else None
     process = start_client(LIVE_VIEW_PORT, seconds + 1.0) if reader else None
     try:
         client.spin_for(1.0)  # connected and subscribed before the window opens

@@ -30,7 +30,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent / "test"))  # robot_data_files: the example-robot-data URDFs
+sys.path.insert(1, str(HERE.parent / "test" / "support"))  # robot_data_files: the example-robot-data URDFs
 
 SECTIONS = ("core", "motion", "closedform", "collision", "nodes", "recorder", "liveview", "physics", "limits", "servo")
 

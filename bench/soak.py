@@ -49,7 +49,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "test"))  # collision_robots, live_view_client
+sys.path.insert(
+    0, str(Path(__file__).resolve().parent.parent / "test" / "support")
+)  # collision_robots, live_view_client
 
 #: The lines' ends: offsets [m] from the Panda's ready hand position, 0.3 m apart in y, away
 #: from bench_collision's sphere (which sits 0.16 m in front of the hand).

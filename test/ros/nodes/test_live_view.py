@@ -9,10 +9,8 @@ The values are checked against the FK of manip_kin.core.kinematics, composed her
 
 from __future__ import annotations
 
-import base64
 import fcntl
 import json
-import os
 import socket
 import struct
 import subprocess
@@ -23,7 +21,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from live_view_client import ensure_installed, start_client
+from live_view_client import ensure_installed, stalled_client, start_client
 
 from manip_kin.core.robots import load_robot
 from manip_kin.core.rotations import quat_to_matrix
@@ -215,69 +213,13 @@ def test_a_client_that_connects_later_still_gets_the_description_and_static_tf(l
     assert node._intake_thread.is_alive()
 
 
-# A client that subscribes to everything and then never reads: a plain socket with a tiny
-# receive buffer, so the server's socket to it fills within a fraction of a second.
-
-
-def _read_frame(sock: socket.socket) -> tuple[int, bytes]:
-    def exactly(n: int) -> bytes:
-        data = b""
-        while len(data) < n:
-            chunk = sock.recv(n - len(data))
-            assert chunk, "server closed the connection"
-            data += chunk
-        return data
-
-    first, second = exactly(2)
-    length = second & 0x7F
-    if length == 126:
-        (length,) = struct.unpack(">H", exactly(2))
-    elif length == 127:
-        (length,) = struct.unpack(">Q", exactly(8))
-    return first & 0x0F, exactly(length)
-
-
-def _send_text(sock: socket.socket, text: str) -> None:
-    payload, mask = text.encode(), os.urandom(4)
-    header = b"\x81" + (
-        bytes([0x80 | len(payload)]) if len(payload) < 126 else b"\xfe" + struct.pack(">H", len(payload))
-    )
-    sock.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
-
-
-def _stalled_client(port: int) -> socket.socket:
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.settimeout(10)
-    sock.connect(("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(
-        (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-            f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
-        ).encode()
-    )
-    response = b""
-    while b"\r\n\r\n" not in response:
-        response += sock.recv(1)
-    assert b" 101 " in response.split(b"\r\n")[0], response
-    while True:
-        opcode, payload = _read_frame(sock)
-        if opcode == 1 and json.loads(payload).get("op") == "advertise":
-            channels = json.loads(payload)["channels"]
-            break
-    subscriptions = [{"id": i, "channelId": c["id"]} for i, c in enumerate(channels)]
-    _send_text(sock, json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
-    return sock
-
-
 def _unread_bytes(sock: socket.socket) -> int:
     return struct.unpack("i", fcntl.ioctl(sock.fileno(), termios.FIONREAD, b"\0\0\0\0"))[0]
 
 
 def test_a_client_that_never_reads_does_not_hold_back_another(live_view, foxglove_client):
     node = live_view.start_view(rate_hz=100.0, message_backlog=32)
-    stalled = _stalled_client(node.port)
+    stalled = stalled_client(node.port)
     try:
         live_view.spin_for(0.5)
         result = _run_client(live_view, node.port, 2.0, "/joint_states,/tf", publish_hz=250.0)
