@@ -40,6 +40,7 @@ import argparse
 import json
 import os
 import struct
+import subprocess
 import sys
 import tempfile
 import threading
@@ -128,7 +129,6 @@ def _recorder_dropped(summary: str) -> int | None:
 
 def _add_obstacles(env: dict, base_frame: str, hand_xyz: np.ndarray) -> None:
     """bench_collision's three obstacles on ``collision_objects``, through ``manip_kin obstacle add``."""
-    import subprocess
     import sysconfig
 
     from bench_collision import _obstacle_arguments
@@ -247,7 +247,7 @@ def run_soak(
         try:
             viewer_out, _ = viewer.communicate(timeout=30)
             viewer_result = json.loads(viewer_out)
-        except (ValueError, OSError, __import__("subprocess").TimeoutExpired) as error:
+        except (ValueError, OSError, subprocess.TimeoutExpired) as error:
             viewer.kill()
             viewer_result = {"problems": [f"no result from the client: {error}"]}
         recorder_code = pipeline.stop_process("recorder", timeout=60)

@@ -3,8 +3,9 @@
 A recorder of all topics (``recorder -p all_topics:=true``, ``ros2 bag record -a``) subscribes a
 topic once it discovers a publisher of it; a command-line client's one-shot message can go out
 before that. :class:`~manip_kin.pipeline.client.PipelineClient` publishes it latched and waits
-for the recorders these functions name. A recorder is a node whose name holds ``recorder``
-(manip_kin's ``recorder``, rosbag2's ``rosbag2_recorder``).
+for the recorders these functions name. A recorder is a node named ``recorder`` or
+``…_recorder`` (manip_kin's ``recorder``, rosbag2's ``rosbag2_recorder``; not, say,
+``recorder_test``).
 """
 
 from __future__ import annotations
