@@ -118,6 +118,14 @@ def _joint_step(
     return state
 
 
+def _function_source(name: str, n: int, emit: _Emitter, outputs: Sequence[object]) -> str:
+    """``def name(q)``: unpack the ``n`` joint values, run ``emit``'s statements, return ``outputs`` as a flat tuple."""
+    arguments = ", ".join(f"q{i}" for i in range(n)) + ("," if n == 1 else "")
+    body = [f"    {arguments} = q"] + [f"    {line}" for line in emit.lines]
+    body.append("    return (" + ", ".join(repr(v) if isinstance(v, float) else v for v in outputs) + ",)")
+    return f"def {name}(q):\n" + "\n".join(body) + "\n"
+
+
 def generate_source(
     fixed: np.ndarray, revolute: Sequence[bool], tail: np.ndarray, count: int, with_jacobian: bool
 ) -> str:
@@ -158,10 +166,7 @@ def generate_source(
                 for r in range(3):
                     linear[r][i] = z[r]
         outputs += [v for row in angular + linear for v in row]
-    arguments = ", ".join(f"q{i}" for i in range(n)) + ("," if n == 1 else "")
-    body = [f"    {arguments} = q"] + [f"    {line}" for line in emit.lines]
-    body.append("    return (" + ", ".join(repr(v) if isinstance(v, float) else v for v in outputs) + ",)")
-    return "def chain(q):\n" + "\n".join(body) + "\n"
+    return _function_source("chain", n, emit, outputs)
 
 
 def compile_chain(
@@ -228,10 +233,7 @@ def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_of
         frame = _times_constant(emit, state, frame_offsets[i])
         outputs += [frame[r][c] for r in range(3) for c in range(4)] + bottom
     outputs += [v for row in twists for v in row]
-    arguments = ", ".join(f"q{i}" for i in range(n)) + ("," if n == 1 else "")
-    body = [f"    {arguments} = q"] + [f"    {line}" for line in emit.lines]
-    body.append("    return (" + ", ".join(repr(v) if isinstance(v, float) else v for v in outputs) + ",)")
-    return "def frames(q):\n" + "\n".join(body) + "\n"
+    return _function_source("frames", n, emit, outputs)
 
 
 def compile_frames(
