@@ -330,7 +330,7 @@ class ControllerSupervisor:
         self._set(ControllerState.STALE_INPUT, f"control step failed: {error}")
 
     def pose_step_done(
-        self, output: PoseStepOutput, feed_forward_used: bool, now_ns: int = 0, braking_joints: Sequence[int] = ()
+        self, output: PoseStepOutput, feed_forward_used: bool, now_ns: int, braking_joints: Sequence[int] = ()
     ) -> None:
         """Classify a pose step. Converged only while the goal is not moving (no feed-forward
         motion), counting the task's error components only. A resting goal whose error stops
@@ -386,7 +386,7 @@ class ControllerSupervisor:
         else:
             self._classify_limits(limited_joints, f"following the {self.goal_kind} command")
 
-    def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool, now_ns: int = 0) -> None:
+    def joint_step_done(self, output: JointStepOutput, feed_forward_used: bool, now_ns: int) -> None:
         """Classify a joint tracking step: converged when the reference rests (or its velocity
         is no longer used) and every joint is within tolerance of it."""
         error = float(np.max(np.abs(output.joint_error))) if len(output.joint_error) else 0.0

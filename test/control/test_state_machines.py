@@ -110,7 +110,7 @@ def test_controller_stale_idle_tracking_and_timeouts():
     assert not supervisor.gate(20 * MS) and supervisor.state is ControllerState.IDLE
     supervisor.goal_received(30 * MS, GoalKind.POSE)
     assert supervisor.gate(40 * MS)
-    supervisor.pose_step_done(_pose_output(position=(0.1, 0.0, 0.0)), feed_forward_used=False)
+    supervisor.pose_step_done(_pose_output(position=(0.1, 0.0, 0.0)), feed_forward_used=False, now_ns=0)
     assert supervisor.state is ControllerState.TRACKING and supervisor.active
     # Joint states stop for longer than the timeout.
     assert not supervisor.gate(111 * MS)
@@ -141,35 +141,35 @@ def test_feed_forward_freshness():
 def test_pose_convergence_counts_the_task_components_only():
     output = _pose_output(orientation=(0.3, 0.0, 0.0), position=(5e-5, 0.0, 0.0))
     full = _controller()
-    full.pose_step_done(output, feed_forward_used=False)
+    full.pose_step_done(output, feed_forward_used=False, now_ns=0)
     assert full.state is ControllerState.TRACKING  # 0.3 rad of orientation error counts
     position_only = _controller(task=parse_task("position"))
-    position_only.pose_step_done(output, feed_forward_used=False)
+    position_only.pose_step_done(output, feed_forward_used=False, now_ns=0)
     assert position_only.state is ControllerState.CONVERGED
     # position_yaw counts rz but not rx.
     yaw = _controller(task=parse_task("position_yaw"))
-    yaw.pose_step_done(output, feed_forward_used=False)
+    yaw.pose_step_done(output, feed_forward_used=False, now_ns=0)
     assert yaw.state is ControllerState.CONVERGED
-    yaw.pose_step_done(_pose_output(orientation=(0.0, 0.0, 0.3)), feed_forward_used=False)
+    yaw.pose_step_done(_pose_output(orientation=(0.0, 0.0, 0.3)), feed_forward_used=False, now_ns=0)
     assert yaw.state is ControllerState.TRACKING
     # Position above tolerance never converges.
-    position_only.pose_step_done(_pose_output(position=(2e-4, 0.0, 0.0)), feed_forward_used=False)
+    position_only.pose_step_done(_pose_output(position=(2e-4, 0.0, 0.0)), feed_forward_used=False, now_ns=0)
     assert position_only.state is ControllerState.TRACKING
 
 
 def test_moving_goal_is_not_converged_and_singular_and_limits_are_reported():
     supervisor = _controller()
     supervisor.twist_received(0, moving=True)
-    supervisor.pose_step_done(_pose_output(), feed_forward_used=True)
+    supervisor.pose_step_done(_pose_output(), feed_forward_used=True, now_ns=0)
     assert supervisor.state is ControllerState.TRACKING
-    supervisor.pose_step_done(_pose_output(), feed_forward_used=False)  # twist stale: the goal rests
+    supervisor.pose_step_done(_pose_output(), feed_forward_used=False, now_ns=0)  # twist stale: the goal rests
     assert supervisor.state is ControllerState.CONVERGED
     supervisor.twist_received(0, moving=False)  # a zero twist is a resting goal
-    supervisor.pose_step_done(_pose_output(), feed_forward_used=True)
+    supervisor.pose_step_done(_pose_output(), feed_forward_used=True, now_ns=0)
     assert supervisor.state is ControllerState.CONVERGED
-    supervisor.pose_step_done(_pose_output(position=(0.1, 0, 0), singular=True), feed_forward_used=False)
+    supervisor.pose_step_done(_pose_output(position=(0.1, 0, 0), singular=True), feed_forward_used=False, now_ns=0)
     assert supervisor.state is ControllerState.SINGULAR and supervisor.level == "warn"
-    supervisor.pose_step_done(_pose_output(position=(0.1, 0, 0), limited=(0, 2)), feed_forward_used=False)
+    supervisor.pose_step_done(_pose_output(position=(0.1, 0, 0), limited=(0, 2)), feed_forward_used=False, now_ns=0)
     assert supervisor.state is ControllerState.JOINT_LIMITED and supervisor.detail.endswith("j1, j3")
     assert supervisor.level == "ok"
 
@@ -185,16 +185,22 @@ def test_joint_reference_convergence_and_latest_goal_wins():
     supervisor.joint_state_received(0)
     supervisor.goal_received(0, GoalKind.JOINT, moving=True)
     assert supervisor.gate(0) and supervisor.goal_kind is GoalKind.JOINT
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), True)
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), True, now_ns=0)
     assert supervisor.state is ControllerState.TRACKING  # the reference still moves
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), False)
+    supervisor.joint_step_done(SimpleNamespace(joint_error=np.zeros(3), limited_joints=()), False, now_ns=0)
     assert supervisor.state is ControllerState.CONVERGED  # its velocity is stale: it rests
     supervisor.goal_received(1 * MS, GoalKind.JOINT, moving=False)
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -2e-3, 0.0]), limited_joints=()), True)
+    supervisor.joint_step_done(
+        SimpleNamespace(joint_error=np.array([0.0, -2e-3, 0.0]), limited_joints=()), True, now_ns=0
+    )
     assert supervisor.state is ControllerState.TRACKING
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, -9e-4, 5e-4]), limited_joints=()), True)
+    supervisor.joint_step_done(
+        SimpleNamespace(joint_error=np.array([0.0, -9e-4, 5e-4]), limited_joints=()), True, now_ns=0
+    )
     assert supervisor.state is ControllerState.CONVERGED
-    supervisor.joint_step_done(SimpleNamespace(joint_error=np.array([0.0, 0.1, 0.0]), limited_joints=(1,)), True)
+    supervisor.joint_step_done(
+        SimpleNamespace(joint_error=np.array([0.0, 0.1, 0.0]), limited_joints=(1,)), True, now_ns=0
+    )
     assert supervisor.state is ControllerState.JOINT_LIMITED and supervisor.detail.endswith("j2")
     supervisor.goal_received(2 * MS, GoalKind.POSE, moving=True)  # a pose ignores "moving"
     assert supervisor.goal_kind is GoalKind.POSE
