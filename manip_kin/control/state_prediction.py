@@ -18,6 +18,9 @@ stamp with the newest command it holds. A command published now is at the robot
 that, and the state it acts on is the one in the middle of that period. A robot that
 stamps a state *before* its cycle's command takes effect (ros2_control's read → update
 → write) is the same model with one period more of command latency.
+
+The goal the law compares the state with must be for the same instant:
+:mod:`manip_kin.control.streamed_goal`.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ __all__ = [
     "PLAUSIBLE_RATE_FACTOR",
     "command_horizon",
     "predict_positions",
+    "prediction_horizon",
     "state_for_command",
 ]
 
@@ -105,11 +109,16 @@ def state_for_command(
         not finite or above ``max_rate``, or when the age is outside
         ``[-period, MAX_STATE_AGE_PERIODS·period]``.
     """
+    horizon = prediction_horizon(qdot, state_age, period, command_latency, max_rate)
+    return q if horizon is None else predict_positions(q, qdot, horizon, lower, upper)
+
+
+def prediction_horizon(qdot, state_age: float, period: float, command_latency: float, max_rate) -> float | None:
+    """:func:`command_horizon` [s] for a state with these velocities and age, or None where
+    :func:`state_for_command` uses the state as it is (see there for the arguments)."""
     if qdot is None or not -period <= state_age <= MAX_STATE_AGE_PERIODS * period:
-        return q
-    rates = float_list(qdot)
-    for rate, limit in zip(rates, float_list(max_rate)):
+        return None
+    for rate, limit in zip(float_list(qdot), float_list(max_rate)):
         if not abs(rate) <= limit:  # False for NaN too
-            return q
-    horizon = command_horizon(state_age, period, command_latency)
-    return predict_positions(q, rates, horizon, lower, upper)
+            return None
+    return command_horizon(state_age, period, command_latency)

@@ -37,7 +37,13 @@ from manip_kin.control.state_machines import (
     ControllerSupervisorConfig,
     GoalKind,
 )
-from manip_kin.control.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
+from manip_kin.control.state_prediction import (
+    MAX_STATE_AGE_PERIODS,
+    PLAUSIBLE_RATE_FACTOR,
+    predict_positions,
+    prediction_horizon,
+)
+from manip_kin.control.streamed_goal import StreamedGoal, advance_reference
 from manip_kin.core.bounds import InputBounds
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.errors import ManipKinError
@@ -113,7 +119,7 @@ class CartesianControllerNode(LoopingNode):
         self.q: np.ndarray | None = None
         self._state_velocities: np.ndarray | None = None
         self._state_stamp_ns = 0
-        # As lists: state_for_command computes on plain floats every cycle.
+        # As lists: the prediction computes on plain floats every cycle.
         self._prediction_bounds = (
             self.model.lower.tolist(),
             self.model.upper.tolist(),
@@ -121,7 +127,12 @@ class CartesianControllerNode(LoopingNode):
         )
         self.goal: np.ndarray | None = None
         self.goal_stamp = ""
+        self._reference_stamp_ns = 0
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
+        # The goal and twist for the predicted state's instant (see law_state).
+        self._streamed = StreamedGoal(
+            MAX_STATE_AGE_PERIODS * self.dt, self.bounds.max_twist_linear, self.bounds.max_twist_angular
+        )
         self.reference: tuple[np.ndarray, np.ndarray] | None = None
         self.output: ControlOutput | None = None
         self.joint_output: JointTrackingOutput | None = None
@@ -253,6 +264,9 @@ class CartesianControllerNode(LoopingNode):
         )
         self._references = JointReferenceReader(model)
         self.bounds = bounds
+        self._streamed = StreamedGoal(
+            MAX_STATE_AGE_PERIODS * self.dt, bounds.max_twist_linear, bounds.max_twist_angular
+        )
         return None
 
     # --- inputs --------------------------------------------------------------------------------
@@ -290,6 +304,7 @@ class CartesianControllerNode(LoopingNode):
                 continue
             self.goal = pose_stamped_to_matrix(msg)
             pose_stamp = msg.header.stamp
+            self._streamed.pose_received(stamp_to_ns(pose_stamp), self.goal)
         while (msg := self._twist_sub.take()) is not None:
             problem = twist_problem(
                 msg, self.base_frame, "goal twist", self.bounds.max_twist_linear, self.bounds.max_twist_angular
@@ -303,6 +318,7 @@ class CartesianControllerNode(LoopingNode):
                 continue
             angular, linear = twist_to_arrays(msg.twist)
             self._twist = (angular, linear)
+            self._streamed.twist_received(stamp_to_ns(msg.header.stamp), angular, linear)
             self.supervisor.twist_received(now_ns, bool(angular.any() or linear.any()))
         while (msg := self._reference_sub.take()) is not None:
             try:
@@ -316,6 +332,7 @@ class CartesianControllerNode(LoopingNode):
                 )
                 continue
             reference_stamp = msg.header.stamp
+            self._reference_stamp_ns = stamp_to_ns(reference_stamp)
         # The latest command of any kind wins; when several came in one cycle, the latest stamp.
         taken = [
             (stamp_to_ns(stamp), kind)
@@ -380,20 +397,25 @@ class CartesianControllerNode(LoopingNode):
         if not self._halting:
             self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(self._zeros)))
 
-    def law_positions(self) -> np.ndarray:
+    def law_state(self) -> tuple[np.ndarray, int | None]:
         """The joint positions the law runs on: the reported ones, or with ``predict_state``
-        those predicted for the period the next command drives (:mod:`manip_kin.control.state_prediction`)."""
+        those predicted for the period the next command drives (:mod:`manip_kin.control.state_prediction`);
+        and the instant they are for on the ROS clock [ns], which the goal is moved to (None:
+        the state as reported, the goal as it came)."""
         if not self.predict_state:
-            return self.q
-        now_ns = self.ros_time_ns()
-        return state_for_command(
-            self.q,
+            return self.q, None
+        lower, upper, max_rate = self._prediction_bounds
+        horizon = prediction_horizon(
             self._state_velocities,
-            (now_ns - self._state_stamp_ns) * 1e-9,
+            (self.ros_time_ns() - self._state_stamp_ns) * 1e-9,
             self.dt,
             self.command_latency,
-            *self._prediction_bounds,
+            max_rate,
         )
+        if horizon is None:
+            return self.q, None
+        q = predict_positions(self.q, self._state_velocities, horizon, lower, upper)
+        return q, self._state_stamp_ns + int(horizon * 1e9)
 
     def _cycle(self, now_ns: int) -> None:
         if self._halting:  # halt() owns the command stream now
@@ -406,10 +428,10 @@ class CartesianControllerNode(LoopingNode):
         q = None
         if supervisor.gate(now_ns):
             try:
-                q = self.law_positions()
+                q, instant_ns = self.law_state()
                 kind = supervisor.goal_kind
                 if kind is GoalKind.JOINT:
-                    target = self._joint_step(now_ns, q)
+                    target = self._joint_step(now_ns, q, instant_ns)
                 elif kind is GoalKind.TWIST:
                     self.output, target = self.servo.twist_step(self.law, q, now_ns, self.dt, self.limit_horizon)
                     limited = set(self.output.limited_joints) | set(self.command_filter.braking_joints)
@@ -423,7 +445,10 @@ class CartesianControllerNode(LoopingNode):
                     supervisor.servo_step_done(self.joint_output.limited_joints, False, 1.0)
                 else:
                     twist_fresh = supervisor.feed_forward_fresh(now_ns)
-                    output = self.law.step(q, self.goal, self._twist if twist_fresh else None, self.limit_horizon)
+                    goal, twist = self.goal, self._twist if twist_fresh else None
+                    if twist is not None and instant_ns is not None:
+                        goal, twist = self._streamed.at(instant_ns)
+                    output = self.law.step(q, goal, twist, self.limit_horizon)
                     self.output = output
                     target = output.qdot
                     supervisor.pose_step_done(output, twist_fresh, now_ns, self.command_filter.braking_joints)
@@ -502,11 +527,16 @@ class CartesianControllerNode(LoopingNode):
         self.halt()
         super().stop()
 
-    def _joint_step(self, now_ns: int, q: np.ndarray) -> np.ndarray:
+    def _joint_step(self, now_ns: int, q: np.ndarray, instant_ns: int | None) -> np.ndarray:
         """One step of the joint tracking law from ``q``; the reference velocity is used while it
-        is fresh (as the goal twist: a stalled stream must not carry the arm on)."""
+        is fresh (as the goal twist: a stalled stream must not carry the arm on), and then moves
+        the reference to the instant ``q`` is for (see :meth:`law_state`)."""
         q_reference, qdot_reference = self.reference
         fresh = self.supervisor.goal_fresh(now_ns)
+        if fresh and instant_ns is not None:
+            offset = (instant_ns - self._reference_stamp_ns) * 1e-9
+            if abs(offset) <= MAX_STATE_AGE_PERIODS * self.dt:
+                q_reference = advance_reference(q_reference, qdot_reference, offset)
         output = joint_tracking_step(
             self.model,
             q,

@@ -108,7 +108,8 @@ PARAMETERS = (
         "bool",
         True,
         "run the law on the joint state predicted (from its velocities and stamp) for the period the "
-        "command will drive, compensating the state-command-robot delay",
+        "command will drive, compensating the state-command-robot delay; a streamed goal (goal_pose with "
+        "goal_twist, joint_reference) is moved by its stamp to the same instant",
         tunable=True,
     ),
     # A delay of a second is no real-time command path; the prediction extrapolates over it.

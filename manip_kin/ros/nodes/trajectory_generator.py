@@ -268,15 +268,21 @@ class TrajectoryGeneratorNode(LoopingNode):
         times = np.linspace(0.0, plan.duration, self._path_points)
         self._publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
         # It starts once planned and published (that takes a few ms): its first reference is
-        # then where the arm is. References are stamped with the time they are for, start + t,
-        # on the ROS clock: the start (monotonic) moved to that clock.
-        now_ns = time.monotonic_ns()
-        self._start_stamp_ns = now_ns + self.get_clock().now().nanoseconds - time.monotonic_ns()
+        # then where the arm is.
+        now_ns = self._start_now()
         preempted = self.supervisor.start(plan, "joint trajectory", now_ns, stamp_key(msg.header.stamp), detail)
         self.get_logger().info(
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.joint_time_scaling} "
             f"{detail} from {np.round(q, 4).tolist()} to {np.round(plan.goal, 4).tolist()}"
         )
+        return now_ns
+
+    def _start_now(self) -> int:
+        """The monotonic time a motion starts at; sets its start on the ROS clock: samples are
+        stamped with the time they are for, start + t (a controller moves a sample to the
+        instant its command acts at by that stamp)."""
+        now_ns = time.monotonic_ns()
+        self._start_stamp_ns = self.ros_time_at(now_ns)
         return now_ns
 
     def _plan(self, target_msg: PoseStamped, now_ns: int) -> bool:
@@ -312,7 +318,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         detail = f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
         # The line starts now that it is planned: planning (the reach check) can take longer
         # than a period, and starting it at the cycle's time would skip its first part (a jump).
-        preempted = self.supervisor.start(line, "line", time.monotonic_ns(), stamp_key(target_msg.header.stamp), detail)
+        preempted = self.supervisor.start(line, "line", self._start_now(), stamp_key(target_msg.header.stamp), detail)
         self.get_logger().info(
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.time_scaling} line "
             f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {detail}"
@@ -368,9 +374,8 @@ class TrajectoryGeneratorNode(LoopingNode):
         timing = supervisor.time_into_motion(now_ns)
         if timing is not None:
             t, finished = timing
-            stamp_ns = self.get_clock().now().nanoseconds
+            stamp_ns = self._start_stamp_ns + int(t * 1e9)
             if isinstance(supervisor.motion, JointTrajectoryPlan):
-                stamp_ns = self._start_stamp_ns + int(t * 1e9)
                 q, qdot = supervisor.motion.sample(t)
                 self._reference_pub.publish(self._reference_cdr.encode(stamp_ns, q, qdot))
                 self._last_reference = q

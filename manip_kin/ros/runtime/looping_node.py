@@ -192,10 +192,15 @@ class LoopingNode(Node):
         """Now on the ROS clock (what stamps carry) [ns]."""
         return time.time_ns() if self._wall_clock else self.get_clock().now().nanoseconds
 
+    def ros_time_at(self, monotonic_ns: int) -> int:
+        """A loop time (``time.monotonic_ns()``) on the ROS clock [ns]: what a sample taken at
+        the cycle's start is stamped with, however late in the cycle it is published."""
+        return monotonic_ns + self.ros_time_ns() - time.monotonic_ns()
+
     def stamp_key_of(self, monotonic_ns: int) -> str:
-        """The :func:`~manip_kin.ros.wire.messages.stamp_key` of a loop time (``time.monotonic_ns()``)
-        moved to the ROS clock: how a node reports when something happened in its loop."""
-        return stamp_key(ns_to_stamp(monotonic_ns + self.ros_time_ns() - time.monotonic_ns()))
+        """The :func:`~manip_kin.ros.wire.messages.stamp_key` of a loop time moved to the ROS
+        clock: how a node reports when something happened in its loop."""
+        return stamp_key(ns_to_stamp(self.ros_time_at(monotonic_ns)))
 
     @property
     def status_name(self) -> str:

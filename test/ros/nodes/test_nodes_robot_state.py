@@ -324,3 +324,41 @@ def test_joint_integrator_steps():
     # No command: at rest, twists zero.
     integrator.step(None, 0.01)
     assert not any(integrator.qdot_values) and not any(integrator.tool_twist_values)
+
+
+def test_a_stall_moves_the_arm_on_its_held_command_stamped_at_the_cycle_start(harness):
+    """Through a stall of its own process the simulated arm moves on with the command it holds
+    (for at most command_timeout), and a state is stamped with the time it is the arm's at: the
+    cycle's start, not the later moment it was published."""
+    joint_states = harness.collect(JointState, "/joint_states")
+    node = harness.start(RobotStateNode, robot="irb120", rate_hz=250.0, command_timeout=0.5)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    assert harness.spin_until(lambda: len(joint_states) > 5, 5)  # the states reach the test
+    node.loop.stop()  # the test runs the cycles, at the times it chooses
+    assert not node.loop.running
+    command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
+    harness.publish("/joint_velocity_commands", array_to_multiarray(command))
+    time.sleep(0.05)  # delivered to the node's reader (its cycles take it from there)
+    start_ns = time.monotonic_ns()
+    node._cycle(start_ns)
+    before = np.array(node.plant.q_values)
+    stall = 0.040  # ten periods at 250 Hz
+    cycle_ns = start_ns + int(stall * 1e9)
+    while time.monotonic_ns() < cycle_ns + 5_000_000:  # the cycle runs 5 ms after its start time
+        time.sleep(0.001)
+    expected_stamp = cycle_ns + time.time_ns() - time.monotonic_ns()
+    node._cycle(cycle_ns)
+    np.testing.assert_allclose(np.array(node.plant.q_values) - before, command * stall, rtol=1e-9, atol=1e-12)
+
+    def stamps_ns():
+        return [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in joint_states]
+
+    assert harness.spin_until(lambda: max(stamps_ns()) > expected_stamp - 20_000_000, 5), stamps_ns()[-3:]
+    stamp_ns = max(stamps_ns())
+    assert abs(stamp_ns - expected_stamp) < 1_000_000, (stamp_ns - expected_stamp) * 1e-6
+    # Through a longer stall it moves until the command times out, command_timeout after the
+    # cycle that took it, and then rests.
+    node._cycle(cycle_ns + 2_000_000_000)
+    moved = np.array(node.plant.q_values) - before
+    np.testing.assert_allclose(moved, command * 0.5, rtol=1e-9, atol=1e-12)
+    assert not any(node.plant.qdot_values)

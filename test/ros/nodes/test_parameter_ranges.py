@@ -343,7 +343,7 @@ def test_the_joint_law_and_the_state_prediction_are_finite_for_every_valid_gain_
     dt = 1.0 / CONTROLLER["rate_hz"].coerce(rate)
     q = _configuration(model, q_fractions)
     velocities = np.asarray(velocity_fractions[: model.dof]) * model.velocity_limits
-    # The node's prediction (cartesian_controller.law_positions) with the latency parameter.
+    # The node's prediction (cartesian_controller.law_state) with the latency parameter.
     predicted = state_for_command(
         q,
         velocities,
