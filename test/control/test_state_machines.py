@@ -7,15 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from manip_kin.control.generator_supervisor import GeneratorState, GeneratorSupervisor
 from manip_kin.control.state_machines import (
     ControllerState,
     ControllerSupervisor,
     ControllerSupervisorConfig,
-    GeneratorState,
-    GeneratorSupervisor,
     GoalKind,
-    StatusThrottle,
 )
+from manip_kin.control.status import StatusThrottle
 from manip_kin.core.pose_rows import parse_task
 from manip_kin.errors import InvalidArgumentError
 

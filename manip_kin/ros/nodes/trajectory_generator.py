@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from manip_kin.control.state_machines import GeneratorState, GeneratorSupervisor
+from manip_kin.control.generator_supervisor import GeneratorState, GeneratorSupervisor
 from manip_kin.core.bounds import UNBOUNDED, InputBounds
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.pose_rows import parse_task
@@ -62,7 +62,7 @@ from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper,
 
 
 class TrajectoryGeneratorNode(LoopingNode):
-    """ROS handles around a :class:`~manip_kin.control.state_machines.GeneratorSupervisor` and the motion it runs."""
+    """ROS handles around a :class:`~manip_kin.control.generator_supervisor.GeneratorSupervisor` and the motion it runs."""
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
@@ -124,7 +124,7 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     @property
     def state(self) -> GeneratorState:
-        """The current state (see :class:`~manip_kin.control.state_machines.GeneratorState`)."""
+        """The current state (see :class:`~manip_kin.control.generator_supervisor.GeneratorState`)."""
         return self.supervisor.state
 
     @property

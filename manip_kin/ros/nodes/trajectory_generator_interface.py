@@ -5,7 +5,7 @@ Kept apart from the node so the table can be read (and documented) on its own.
 
 from __future__ import annotations
 
-from manip_kin.control.state_machines import GeneratorState
+from manip_kin.control.generator_supervisor import GeneratorState
 from manip_kin.motion.joint_trajectory import JOINT_TIME_SCALINGS
 from manip_kin.motion.lines import TIME_SCALINGS
 from manip_kin.ros.nodes.collision_params import PATH_CHECK_PARAMETERS

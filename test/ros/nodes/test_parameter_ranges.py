@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from manip_kin.control.joint_tracking import joint_tracking_step
 from manip_kin.control.resolved_rate import CartesianController, ControllerConfig
-from manip_kin.control.state_machines import StatusThrottle
 from manip_kin.control.state_prediction import PLAUSIBLE_RATE_FACTOR, state_for_command
+from manip_kin.control.status import StatusThrottle
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.robots import load_robot
 from manip_kin.errors import InvalidArgumentError
