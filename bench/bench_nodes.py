@@ -150,7 +150,12 @@ def _latency_row(pipeline, label: str, priority: int, trials: int = 500, step_m:
     from rclpy.serialization import deserialize_message
 
     from manip_kin.ros.runtime.polling import RawSubscription
-    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, SharedPriority, set_timer_slack, share_realtime_priority
+    from manip_kin.ros.runtime.scheduling import (
+        TIMER_SLACK_NS,
+        SharedPriority,
+        set_timer_slack,
+        share_realtime_priority,
+    )
 
     # Commands are polled in this thread (no executor in the path); with the nodes at SCHED_FIFO
     # this thread and the ones it waits on (as in the nodes) get the same priority, or the
@@ -237,7 +242,7 @@ def _echo(seconds: float) -> None:
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.ros.runtime.polling import LoopWaiter, PolledSubscription
-    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.runtime.scheduling import TIMER_SLACK_NS, set_timer_slack
 
     rclpy.init()
     node = rclpy.create_node("bench_echo")
@@ -268,7 +273,7 @@ def _round_trip_row(trials: int = 300, label: str = "idle machine") -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from manip_kin.ros.runtime.polling import PolledSubscription
-    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.runtime.scheduling import TIMER_SLACK_NS, set_timer_slack
 
     echo = subprocess.Popen([sys.executable, __file__, "echo", str(trials * 0.02 + 15)])
     context = rclpy.Context()

@@ -25,7 +25,7 @@ def _twist_latency_row(rate_hz: float, priority: int, trials: int) -> dict:
 
     from manip_kin.pipeline import Pipeline, pipeline_processes
     from manip_kin.ros.runtime.polling import RawSubscription
-    from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, set_timer_slack
+    from manip_kin.ros.runtime.scheduling import TIMER_SLACK_NS, set_timer_slack
     from manip_kin.ros.wire.messages import make_twist_stamped
 
     processes = pipeline_processes(

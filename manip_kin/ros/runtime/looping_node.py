@@ -66,7 +66,7 @@ class LoopingNode(Node):
             cycle: the work of one cycle.
             realtime_priority: SCHED_FIFO priority of the loop thread (0: normal).
             scheduler_slice: under normal scheduling, the loop thread's time slice [s] (0: the
-                kernel's default; see :func:`manip_kin.ros.runtime.rate_loop.set_scheduler_slice`).
+                kernel's default; see :func:`manip_kin.ros.runtime.scheduling.set_scheduler_slice`).
             wake_on: subscriptions whose messages run a cycle at once (a new goal) instead of
                 waiting for the next tick.
         """

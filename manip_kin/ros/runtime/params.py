@@ -269,7 +269,7 @@ REALTIME_PRIORITY = ParamSpec(
     maximum=99,  # the range of SCHED_FIFO on Linux
 )
 
-#: Under normal scheduling, the loop thread's EEVDF slice (see rate_loop.set_scheduler_slice).
+#: Under normal scheduling, the loop thread's EEVDF slice (see scheduling.set_scheduler_slice).
 SCHEDULER_SLICE = ParamSpec(
     "scheduler_slice",
     "float",

@@ -14,8 +14,9 @@ import pytest
 
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.ros.runtime.params import ParamSpec
-from manip_kin.ros.runtime.rate_loop import TIMER_SLACK_NS, RateLoop
+from manip_kin.ros.runtime.rate_loop import RateLoop
 from manip_kin.ros.runtime.runner import TEARDOWN_TIMEOUT_S
+from manip_kin.ros.runtime.scheduling import TIMER_SLACK_NS
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
 
 
