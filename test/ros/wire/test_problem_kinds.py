@@ -207,6 +207,16 @@ def _values_for(data, names, what: str) -> list[float]:
     return data.draw(st.lists(number, min_size=max(0, count), max_size=max(0, count)), what)
 
 
+def _assert_read_as(read, msg, expected: ProblemKind | None) -> None:
+    """``read(msg)`` accepts ``msg`` (``expected`` None) or refuses it as ``expected``."""
+    if expected is None:
+        read(msg)
+        return
+    with pytest.raises(InvalidMessageError) as raised:
+        read(msg)
+    assert raised.value.kind is expected, str(raised.value)
+
+
 def _joint_state(names, positions) -> JointState:
     msg = JointState()
     msg.name = list(names)
@@ -237,14 +247,7 @@ def test_joint_state_mapper_kind(data):
     positions = _values_for(data, names, "positions")
     lower, upper = -np.ones(len(model_names)), np.ones(len(model_names))
     expected = _expected_state_kind(model_names, names, positions, lower, upper)
-    mapper = JointStateMapper(model_names, lower, upper)
-    msg = _joint_state(names, positions)
-    if expected is None:
-        mapper.positions(msg)
-        return
-    with pytest.raises(InvalidMessageError) as raised:
-        mapper.positions(msg)
-    assert raised.value.kind is expected, str(raised.value)
+    _assert_read_as(JointStateMapper(model_names, lower, upper).positions, _joint_state(names, positions), expected)
 
 
 @SETTINGS
@@ -269,13 +272,7 @@ def test_joint_reference_reader_kind(data):
             expected = K.RANGE
         else:
             expected = None
-    reader = JointReferenceReader(MODEL)
-    if expected is None:
-        reader.read(msg)
-        return
-    with pytest.raises(InvalidMessageError) as raised:
-        reader.read(msg)
-    assert raised.value.kind is expected, str(raised.value)
+    _assert_read_as(JointReferenceReader(MODEL).read, msg, expected)
 
 
 # --- jog and twist commands (servo) -----------------------------------------------------------------
