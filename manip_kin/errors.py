@@ -72,7 +72,8 @@ class Problem(str):
     def of(cls, reason: object) -> Problem:
         """``reason`` (an error, a :class:`Problem` or a plain text) as a :class:`Problem`: an
         error's or a problem's own kind, :attr:`ProblemKind.OTHER` for anything else."""
-        return cls(getattr(reason, "kind", ProblemKind.OTHER), str(reason))
+        kind = getattr(reason, "kind", None)
+        return cls(kind if isinstance(kind, ProblemKind) else ProblemKind.OTHER, str(reason))
 
 
 class ManipKinError(Exception):

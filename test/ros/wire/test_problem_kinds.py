@@ -90,6 +90,7 @@ def test_errors_carry_the_kind_they_are_given_or_their_problems():
     assert Problem.of(InvalidArgumentError("x", kind=K.REACH)).kind is K.REACH
     assert Problem.of(RuntimeError("contains NaN")).kind is K.OTHER
     assert Problem.of("quaternion has length 2").kind is K.OTHER
+    assert Problem.of(SimpleNamespace(kind="unreachable")).kind is K.OTHER  # a kind of something else
 
 
 # --- poses and twists ---------------------------------------------------------------------------
