@@ -260,7 +260,7 @@ REEXPORTS: dict[str, dict[str, str]] = {
         ),
         **dict.fromkeys(
             "QUATERNION_TOLERANCE InvalidMessageError JointStateMapper check_command"
-            " command_problem frame_problem pose_problem problem_kind twist_problem".split(),
+            " command_problem frame_problem pose_problem twist_problem".split(),
             "ros.wire.validation",
         ),
         "check_pose_stamped": "ros.wire.messages",

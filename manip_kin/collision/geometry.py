@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_kin.collision.meshes import convex_vertices, load_convex_mesh, resolve_mesh_uri
+from manip_kin.collision.meshes import convex_vertices, load_convex_mesh
+from manip_kin.core.mesh_uris import require_mesh_file
 from manip_kin.core.model import RobotModel
 from manip_kin.core.rotations import angle_axis_to_matrix, invert_transform
 from manip_kin.core.scene import Obstacle, ShapeKind
@@ -91,7 +92,7 @@ def obstacle_shape(obstacle: Obstacle, mesh_search_path: str = "") -> CollisionS
     if obstacle.shape is ShapeKind.CYLINDER:
         return make_shape(ShapeKind.CYLINDER, (obstacle.radius, obstacle.height))
     try:
-        path = resolve_mesh_uri(obstacle.mesh_uri, mesh_search_path)
+        path = require_mesh_file(obstacle.mesh_uri, mesh_search_path)
     except FileNotFoundError as error:
         raise ModelFileError(where, "mesh_resource", str(error)) from None
     return make_shape(ShapeKind.MESH, obstacle.scale, path, where, "mesh_resource")
@@ -182,7 +183,7 @@ def _urdf_shape(reader: UrdfTree, element: ET.Element, where: str, mesh_search_p
             raise reader.fail(f"{at}@scale", f"{scale.tolist()}; valid: three factors > 0")
         relative_to = Path(reader.source).parent if Path(reader.source).is_file() else None
         try:
-            path = resolve_mesh_uri(uri, mesh_search_path, relative_to)
+            path = require_mesh_file(uri, mesh_search_path, relative_to)
         except FileNotFoundError as error:
             raise reader.fail(f"{at}@filename", str(error)) from None
         return make_shape(ShapeKind.MESH, scale, path, reader.source, f"{at}@filename")

@@ -46,7 +46,7 @@ import numpy as np
 
 from manip_kin.control.joint_limits import JointLimits
 from manip_kin.core.model import RobotModel
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.errors import InvalidArgumentError, ProblemKind
 from manip_kin.motion.lines import TimeScaling
 
 JOINT_TIME_SCALINGS = ("cubic", "quintic", "trapezoidal")
@@ -201,7 +201,8 @@ def _check_peaks(model: RobotModel, plan: JointTrajectoryPlan, peaks: np.ndarray
         raise InvalidArgumentError(
             f"point {segment + 1} (at {plan.times[segment + 1]:g} s) is reached too fast: joint "
             f"'{model.joint_names[joint]}' needs {peaks[segment, joint]:.4g} {base}{unit} of {quantity}, "
-            f"its limit is {limit[joint]:g} {base}{unit}; valid: later time_from_start"
+            f"its limit is {limit[joint]:g} {base}{unit}; valid: later time_from_start",
+            kind=ProblemKind.SPEED,
         )
 
 
@@ -237,14 +238,17 @@ def _joint_order(model: RobotModel, joint_names: Sequence[str]) -> np.ndarray:
     names = list(joint_names)
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
-        raise InvalidArgumentError(f"joint names {duplicates} appear more than once; valid: each joint once")
+        raise InvalidArgumentError(
+            f"joint names {duplicates} appear more than once; valid: each joint once", kind=ProblemKind.LENGTH
+        )
     unknown = [name for name in names if name not in model.joint_names]
     if unknown:
         raise InvalidArgumentError(f"joints {unknown} are not joints of {model.name}; valid: {model.joint_names}")
     missing = [name for name in model.joint_names if name not in names]
     if missing:
         raise InvalidArgumentError(
-            f"trajectory lacks joints {missing}; valid: every joint of {model.name} named: {model.joint_names}"
+            f"trajectory lacks joints {missing}; valid: every joint of {model.name} named: {model.joint_names}",
+            kind=ProblemKind.LENGTH,
         )
     return np.array([names.index(name) for name in model.joint_names], dtype=np.intp)
 
@@ -292,13 +296,18 @@ def plan_joint_trajectory(
         values = np.asarray(point.positions, dtype=float)
         rates = np.asarray(point.velocities, dtype=float)
         if values.shape != (count,):
-            raise InvalidArgumentError(f"point {k} has {values.size} positions; valid: {count}, one per joint name")
+            raise InvalidArgumentError(
+                f"point {k} has {values.size} positions; valid: {count}, one per joint name", kind=ProblemKind.LENGTH
+            )
         if rates.size and rates.shape != (count,):
             raise InvalidArgumentError(
-                f"point {k} has {rates.size} velocities; valid: none or {count}, one per joint name"
+                f"point {k} has {rates.size} velocities; valid: none or {count}, one per joint name",
+                kind=ProblemKind.LENGTH,
             )
         if not (np.all(np.isfinite(values)) and np.all(np.isfinite(rates))):
-            raise InvalidArgumentError(f"point {k} contains NaN or infinity; valid: finite numbers")
+            raise InvalidArgumentError(
+                f"point {k} contains NaN or infinity; valid: finite numbers", kind=ProblemKind.NON_FINITE
+            )
         q = values[order]
         outside = np.flatnonzero((q < model.lower) | (q > model.upper))
         if outside.size:
@@ -306,7 +315,8 @@ def plan_joint_trajectory(
             unit = "rad" if model.joints[j].is_revolute else "m"
             raise InvalidArgumentError(
                 f"point {k}: joint '{model.joint_names[j]}' = {q[j]:.6g} {unit} is outside its limits; "
-                f"valid: [{model.lower[j]:.6g}, {model.upper[j]:.6g}] {unit}"
+                f"valid: [{model.lower[j]:.6g}, {model.upper[j]:.6g}] {unit}",
+                kind=ProblemKind.RANGE,
             )
         times.append(time)
         positions.append(q)

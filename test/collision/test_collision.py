@@ -21,7 +21,6 @@ from manip_kin.cli import main
 from manip_kin.collision.collision_model import load_collision_model
 from manip_kin.collision.distances import CollisionChecker
 from manip_kin.collision.geometry import model_frames
-from manip_kin.collision.meshes import resolve_mesh_uri
 from manip_kin.collision.path import first_collision_along
 from manip_kin.collision.srdf import link_pair, read_disabled_pairs
 from manip_kin.core.kinematics import frame_pose
@@ -190,20 +189,6 @@ def test_bad_srdf_and_urdf_name_the_file_and_field(panda, tmp_path):
     text = BALL_ARM_URDF.replace('<sphere radius="0.05"/>', '<sphere radius="-1"/>')
     with pytest.raises(ModelFileError, match=r"link\[link2\]/collision\[1\]/geometry/sphere"):
         load_collision_model(load_urdf_string(text, tip_link="tip"), text)
-
-
-def test_mesh_uris_resolve_through_search_path_ament_index_file_and_relative(monkeypatch, tmp_path):
-    urdf, _, share = panda_files()
-    uri = "package://example-robot-data/robots/panda_description/meshes/collision/link3.stl"
-    expected = urdf.parents[1] / "meshes" / "collision" / "link3.stl"
-    assert resolve_mesh_uri(uri, f"{tmp_path}:{share}").samefile(expected)
-    monkeypatch.setenv("AMENT_PREFIX_PATH", str(urdf.parents[5]))  # <prefix>/share/example-robot-data/...
-    assert resolve_mesh_uri(uri).samefile(expected)
-    assert resolve_mesh_uri(f"file://{expected}").samefile(expected)
-    assert resolve_mesh_uri("../meshes/collision/link3.stl", relative_to=urdf.parent).samefile(expected)
-    monkeypatch.delenv("AMENT_PREFIX_PATH")
-    with pytest.raises(FileNotFoundError, match="not in the ament index"):
-        resolve_mesh_uri(uri, str(tmp_path))
 
 
 # --- path check ----------------------------------------------------------------------------------

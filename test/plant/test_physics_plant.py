@@ -17,7 +17,6 @@ from hypothesis import strategies as st
 from robot_data_files import PANDA, example_robot_data_urdf
 
 from manip_kin.core.kinematics import frame_pose
-from manip_kin.core.mesh_uris import resolve_mesh_uri
 from manip_kin.core.robots import load_robot
 from manip_kin.core.scene import Scene, make_obstacle
 from manip_kin.errors import ModelFileError
@@ -225,19 +224,6 @@ def test_any_finite_commands_keep_the_physics_plant_finite_within_its_limits(com
         assert np.all(plant.q >= GENOVA7.lower - 0.05) and np.all(plant.q <= GENOVA7.upper + 0.05)
         assert np.all(np.abs(plant.effort_values) <= 30.0 + 1e-9)
         assert plant.velocity_scale <= 1.0
-
-
-def test_mesh_uris_resolve_through_the_search_path_file_uris_and_relative_paths(tmp_path):
-    mesh = tmp_path / "pkgs" / "my_arm" / "meshes" / "link.stl"
-    mesh.parent.mkdir(parents=True)
-    mesh.write_bytes(b"solid x\nendsolid x\n")
-    search = f"{tmp_path / 'elsewhere'}:{tmp_path / 'pkgs'}"
-    assert resolve_mesh_uri("package://my_arm/meshes/link.stl", search) == mesh
-    assert resolve_mesh_uri("package://my_arm/meshes/none.stl", search) is None
-    assert resolve_mesh_uri("package://other_arm/meshes/link.stl", search) is None
-    assert resolve_mesh_uri(f"file://{mesh}") == mesh
-    assert resolve_mesh_uri("meshes/link.stl", base_dir=mesh.parents[1]) == mesh
-    assert resolve_mesh_uri("https://example.invalid/link.stl", search) is None  # nothing is fetched
 
 
 def test_joint_states_with_effort_encode_as_rclpy_serialises_them():

@@ -46,7 +46,7 @@ from manip_kin.control.state_prediction import (
 from manip_kin.control.streamed_goal import StreamedGoal, advance_reference
 from manip_kin.core.bounds import InputBounds
 from manip_kin.core.kinematics import frame_pose
-from manip_kin.errors import ManipKinError
+from manip_kin.errors import ManipKinError, Problem
 from manip_kin.ros.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
 from manip_kin.ros.nodes.collision_inputs import CollisionInputs
 from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
@@ -64,7 +64,7 @@ from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnosti
 from manip_kin.ros.wire.joint_messages import JointReferenceReader
 from manip_kin.ros.wire.messages import ns_to_stamp, pose_stamped_to_matrix, stamp_key, stamp_to_ns, twist_to_arrays
 from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
-from manip_kin.ros.wire.validation import InvalidMessageError, pose_problem, problem_kind, twist_problem
+from manip_kin.ros.wire.validation import InvalidMessageError, pose_problem, twist_problem
 
 
 class CartesianControllerNode(LoopingNode):
@@ -281,7 +281,7 @@ class CartesianControllerNode(LoopingNode):
             except InvalidMessageError as error:
                 self.rejected_joint_states += 1
                 self._warn(
-                    "joint_state:" + problem_kind(str(error)),
+                    "joint_state:" + error.kind,
                     f"rejected {self._joint_state_sub.subscription.topic_name}: {error}",
                 )
         pose_stamp = reference_stamp = None
@@ -293,12 +293,12 @@ class CartesianControllerNode(LoopingNode):
                     msg, self.base_frame, "goal pose", self._quaternion_tolerance, self.bounds.max_target_distance
                 )
             except InvalidMessageError as error:
-                problem = str(error)
+                problem = Problem.of(error)
             if problem is not None:
                 self.rejected_goals += 1
                 self._rejected(problem, msg)
                 self._warn(
-                    "goal:" + problem_kind(problem),
+                    "goal:" + problem.kind,
                     f"rejected {self._goal_sub.subscription.topic_name}: {problem}; keeping the previous goal",
                 )
                 continue
@@ -312,7 +312,7 @@ class CartesianControllerNode(LoopingNode):
             if problem is not None:
                 self.rejected_twists += 1
                 self._warn(
-                    "twist:" + problem_kind(problem),
+                    "twist:" + problem.kind,
                     f"rejected {self._twist_sub.subscription.topic_name}: {problem}; feed-forward not used",
                 )
                 continue
@@ -327,7 +327,7 @@ class CartesianControllerNode(LoopingNode):
                 self.rejected_references += 1
                 self._rejected(str(error), msg)
                 self._warn(
-                    "reference:" + problem_kind(str(error)),
+                    "reference:" + error.kind,
                     f"rejected {self._reference_sub.subscription.topic_name}: {error}; keeping the previous goal",
                 )
                 continue

@@ -54,7 +54,7 @@ from manip_kin.ros.wire.messages import ns_to_stamp
 from manip_kin.ros.wire.scene_messages import TOPIC as COLLISION_OBJECTS
 from manip_kin.ros.wire.scene_messages import apply_marker_array
 from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
-from manip_kin.ros.wire.validation import command_problem, problem_kind
+from manip_kin.ros.wire.validation import command_problem
 
 NODE_NAME = "robot_state"
 
@@ -264,7 +264,7 @@ class RobotStateNode(LoopingNode):
             if problem is not None:
                 self.rejected_commands += 1
                 self._warn(
-                    problem_kind(problem),
+                    problem.kind,
                     f"rejected {self._command_sub.subscription.topic_name}: {problem}; keeping the previous command",
                 )
                 continue

@@ -32,10 +32,10 @@ from manip_kin.control.servo import (
 )
 from manip_kin.control.state_machines import GoalKind
 from manip_kin.core.kinematics import frame_pose, pose_and_jacobian_in_base
-from manip_kin.errors import UnknownFrameError
+from manip_kin.errors import Problem, ProblemKind, UnknownFrameError
 from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.wire.messages import stamp_to_ns, twist_to_arrays
-from manip_kin.ros.wire.validation import problem_kind, twist_problem
+from manip_kin.ros.wire.validation import twist_problem
 
 
 class ServoInputs:
@@ -89,12 +89,12 @@ class ServoInputs:
         else:
             self._jog_reference.reset()
 
-    def _reject(self, what: str, subscription, problem: str) -> None:
+    def _reject(self, what: str, subscription, problem: Problem) -> None:
         self.rejected += 1
         topic = subscription.subscription.topic_name
-        self._warn(f"{what}:" + problem_kind(problem), f"rejected {topic}: {problem}; command not used")
+        self._warn(f"{what}:" + problem.kind, f"rejected {topic}: {problem}; command not used")
 
-    def _twist_problem(self, msg: TwistStamped) -> str | None:
+    def _twist_problem(self, msg: TwistStamped) -> Problem | None:
         bounds = self.node.bounds
         problem = twist_problem(
             msg, msg.header.frame_id, "twist command", bounds.max_twist_linear, bounds.max_twist_angular
@@ -104,25 +104,32 @@ class ServoInputs:
         try:
             index = resolve_frame(self.model, msg.header.frame_id or self.node.base_frame)
         except UnknownFrameError as error:
-            return f"twist command frame_id {msg.header.frame_id!r:.60}: {str(error)[:200]}"
+            return Problem(ProblemKind.FRAME, f"twist command frame_id {msg.header.frame_id!r:.60}: {str(error)[:200]}")
         angular, linear = twist_to_arrays(msg.twist)
         self.twist = (angular, linear, index)
         return None
 
-    def _jog_problem(self, msg: JointState) -> str | None:
+    def _jog_problem(self, msg: JointState) -> Problem | None:
         names, velocities = list(msg.name), list(msg.velocity)
         if not names or len(names) != len(velocities):
-            return f"joint jog has {len(names)} names and {len(velocities)} velocities; valid: one velocity a name"
+            return Problem(
+                ProblemKind.LENGTH,
+                f"joint jog has {len(names)} names and {len(velocities)} velocities; valid: one velocity a name",
+            )
         rates = np.zeros(self.model.dof)
         for name, value in zip(names, velocities):
             index = self._names.get(name)
             if index is None:
-                return (
-                    f"joint jog names {name!r:.60}, not a joint of {self.model.name}; valid: {', '.join(self._names)}"
+                return Problem(
+                    ProblemKind.OTHER,
+                    f"joint jog names {name!r:.60}, not a joint of {self.model.name}; valid: {', '.join(self._names)}",
                 )
             if not (math.isfinite(value) and abs(value) <= self.model.velocity_limits[index] * 1.0000001):
                 limit = self.model.velocity_limits[index]
-                return f"joint jog velocity {value!r:.30} for {name}; valid: finite, at most {limit:g} in magnitude"
+                return Problem(
+                    ProblemKind.SPEED if math.isfinite(value) else ProblemKind.NON_FINITE,
+                    f"joint jog velocity {value!r:.30} for {name}; valid: finite, at most {limit:g} in magnitude",
+                )
             rates[index] = value
         self.jog = rates
         return None

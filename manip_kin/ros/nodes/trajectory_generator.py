@@ -38,7 +38,7 @@ from manip_kin.control.generator_supervisor import GeneratorState, GeneratorSupe
 from manip_kin.core.bounds import UNBOUNDED, InputBounds
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.pose_rows import parse_task
-from manip_kin.errors import InvalidArgumentError, ManipKinError
+from manip_kin.errors import InvalidArgumentError, ManipKinError, Problem
 from manip_kin.motion.joint_trajectory import JointTrajectoryPlan, plan_joint_trajectory
 from manip_kin.motion.line_timing import constant_scaling_problem, line_limits_problem
 from manip_kin.motion.lines import LineTrajectory, MotionLimits, check_line_reachable
@@ -58,7 +58,7 @@ from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnosti
 from manip_kin.ros.wire.joint_messages import trajectory_points
 from manip_kin.ros.wire.messages import make_pose_stamped, ns_to_stamp, pose_stamped_to_matrix, stamp_key, stamp_to_ns
 from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
-from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper, pose_problem, problem_kind
+from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper, pose_problem
 
 
 class TrajectoryGeneratorNode(LoopingNode):
@@ -222,10 +222,12 @@ class TrajectoryGeneratorNode(LoopingNode):
         return target
 
     def _reject(self, msg: PoseStamped | JointTrajectory, reason: str, kind: str = "invalid") -> None:
+        """Refuse ``msg`` for ``reason`` (a :class:`Problem` keys the log line on its kind; any
+        other text, a reach or collision reason, on ``other``); ``kind`` is what the status says."""
         kept = self.supervisor.reject(reason, stamp_key(msg.header.stamp), kind)
         topic = self._trajectory_sub if isinstance(msg, JointTrajectory) else self._target_sub
         self._error(
-            "target:" + problem_kind(reason),
+            "target:" + Problem.of(reason).kind,
             f"rejected {topic.subscription.topic_name}: {reason}; {kept}",
         )
 
@@ -244,7 +246,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         try:
             return self._mapper.positions(state)
         except InvalidMessageError as error:
-            self._reject(msg, f"cannot start from the current {topic}: {error}")
+            self._reject(msg, Problem(error.kind, f"cannot start from the current {topic}: {error}"))
             return None
 
     # --- planning ----------------------------------------------------------------------------------
@@ -259,7 +261,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             plan = plan_joint_trajectory(self.model, q, names, points, self.joint_time_scaling, self.joint_limits)
             collision = self.path_check.problem(*joint_path(plan), "joint trajectory")
         except ManipKinError as error:
-            self._reject(msg, str(error))
+            self._reject(msg, Problem.of(error))
             return None
         if collision:
             self._reject(msg, collision, "unreachable")
@@ -313,7 +315,7 @@ class TrajectoryGeneratorNode(LoopingNode):
                 if too_fast:
                     self._warn("line:limits", too_fast)
         except ManipKinError as error:
-            self._reject(target_msg, str(error))
+            self._reject(target_msg, Problem.of(error))
             return False
         detail = f"line of {line.length:.4f} m, {line.angle:.4f} rad in {line.duration:.3f} s"
         # The line starts now that it is planned: planning (the reach check) can take longer

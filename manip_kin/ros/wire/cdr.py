@@ -20,6 +20,7 @@ import numpy as np
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.core.rotations import matrix_to_quat, quaternion_from_entries
+from manip_kin.errors import ProblemKind
 from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper
 
 _NS_PER_S = 1_000_000_000
@@ -394,5 +395,6 @@ def _deserialize(data: bytes, msg_type, what: str):
         return deserialize_message(data, msg_type)
     except Exception as error:  # noqa: BLE001 - whatever the C layer raises for bad bytes
         raise InvalidMessageError(
-            f"{what} bytes cannot be decoded ({type(error).__name__}); valid: CDR of {msg_type.__name__}"
+            f"{what} bytes cannot be decoded ({type(error).__name__}); valid: CDR of {msg_type.__name__}",
+            kind=ProblemKind.OTHER,
         ) from None

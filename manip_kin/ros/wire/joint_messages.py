@@ -16,6 +16,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from manip_kin.core.model import RobotModel
+from manip_kin.errors import ProblemKind
 from manip_kin.motion.joint_trajectory import TrajectoryPoint
 from manip_kin.ros.wire.messages import to_double_array
 from manip_kin.ros.wire.validation import InvalidMessageError
@@ -86,11 +87,14 @@ class JointReferenceReader:
             lookup = {name: i for i, name in enumerate(names)}
             repeated = sorted({name for name in names if names.count(name) > 1})
             if repeated:
-                raise InvalidMessageError(f"joint reference names {repeated} more than once; valid: each joint once")
+                raise InvalidMessageError(
+                    f"joint reference names {repeated} more than once; valid: each joint once", kind=ProblemKind.LENGTH
+                )
             missing = [name for name in self.model.joint_names if name not in lookup]
             if missing:
                 raise InvalidMessageError(
-                    f"joint reference lacks joints {missing}; valid: names including {self.model.joint_names}"
+                    f"joint reference lacks joints {missing}; valid: names including {self.model.joint_names}",
+                    kind=ProblemKind.LENGTH,
                 )
             self._names = names
             self._index = np.array([lookup[name] for name in self.model.joint_names], dtype=np.intp)
@@ -99,17 +103,21 @@ class JointReferenceReader:
         if position.shape[0] != len(names) or velocity.shape[0] not in (0, len(names)):
             raise InvalidMessageError(
                 f"joint reference has {len(names)} names, {position.shape[0]} positions and "
-                f"{velocity.shape[0]} velocities; valid: one position per name, velocities none or one per name"
+                f"{velocity.shape[0]} velocities; valid: one position per name, velocities none or one per name",
+                kind=ProblemKind.LENGTH,
             )
         q = position[self._index]
         qdot = velocity[self._index] if velocity.shape[0] else np.zeros_like(q)
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qdot))):
-            raise InvalidMessageError("joint reference contains NaN or infinity; valid: finite numbers")
+            raise InvalidMessageError(
+                "joint reference contains NaN or infinity; valid: finite numbers", kind=ProblemKind.NON_FINITE
+            )
         outside = np.flatnonzero((q < self._lower) | (q > self._upper))
         if outside.size:
             j = int(outside[0])
             raise InvalidMessageError(
                 f"joint reference puts '{self.model.joint_names[j]}' at {q[j]:.6g}, outside its limits "
-                f"[{self.model.lower[j]:.6g}, {self.model.upper[j]:.6g}]"
+                f"[{self.model.lower[j]:.6g}, {self.model.upper[j]:.6g}]",
+                kind=ProblemKind.RANGE,
             )
         return q, qdot

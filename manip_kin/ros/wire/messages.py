@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from manip_kin.core.rotations import matrix_to_quat
+from manip_kin.errors import ProblemKind
 from manip_kin.ros.wire.validation import QUATERNION_TOLERANCE, InvalidMessageError, pose_problem
 
 _NS_PER_S = 1_000_000_000
@@ -76,7 +77,9 @@ def quaternion_to_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
     """
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not math.isfinite(norm) or norm < 1e-12:
-        raise InvalidMessageError(f"quaternion ({x}, {y}, {z}, {w}) has length {norm}; valid: a unit quaternion")
+        raise InvalidMessageError(
+            f"quaternion ({x}, {y}, {z}, {w}) has length {norm}; valid: a unit quaternion", kind=ProblemKind.QUATERNION
+        )
     x, y, z, w = x / norm, y / norm, z / norm, w / norm
     return np.array(
         [

@@ -49,7 +49,6 @@ from manip_kin.ros.wire.validation import (
     check_command,
     command_problem,
     pose_problem,
-    problem_kind,
     twist_problem,
 )
 
@@ -284,13 +283,6 @@ def test_joint_state_decoder_matches_rclpy_on_a_random_stream():
             assert sample.velocities is None, context
         assert sample.stamp_ns == decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec, context
     np.testing.assert_array_equal(decoder.positions(serialize_message(fast_layout)), [0.0] * 4)
-
-
-def test_problem_kind():
-    assert problem_kind("goal frame_id 'x' is not the base frame") == "frame"
-    assert problem_kind("contains NaN or infinity") == "finite"
-    assert problem_kind("quaternion (0, 0, 0, 2) has length 2") == "quaternion"
-    assert problem_kind("has 5 values; valid: 6") == "length"
 
 
 def test_diagnostic_helpers():
