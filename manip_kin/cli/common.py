@@ -90,7 +90,7 @@ def add_namespace_argument(parser: argparse.ArgumentParser) -> None:
 
 def namespace_from_args(args: argparse.Namespace) -> str:
     """``--namespace`` normalised (``left`` → ``/left``); InvalidArgumentError when not a ROS namespace."""
-    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.pipeline.status import normalize_namespace
 
     return normalize_namespace(args.namespace)
 

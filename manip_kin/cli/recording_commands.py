@@ -174,7 +174,7 @@ def namespace_remaps(path: str, namespace: str, topics: list[str] | None = None)
             (they would land on the same topics); name one pipeline's topics with ``--topics``.
     """
     from manip_kin.errors import InvalidArgumentError
-    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.pipeline.status import normalize_namespace
     from manip_kin.recording.info import read_info
     from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 

@@ -9,9 +9,10 @@
 None of these imports rclpy at import time (test/conftest.py sets the environment first).
 """
 
-from manip_kin.pipeline.client import PipelineClient, Status, normalize_namespace, status_name
+from manip_kin.pipeline.client import PipelineClient
 from manip_kin.pipeline.domain import ensure_ros_isolation, fresh_domain_env, pick_free_domain
 from manip_kin.pipeline.errors import PipelineError
+from manip_kin.pipeline.status import Status, normalize_namespace, status_name
 from manip_kin.pipeline.supervisor import (
     IRB120_LINE_GENERATOR,
     PIPELINE_NODES,

@@ -31,9 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_kin.pipeline.client import PipelineClient, normalize_namespace, status_name
+from manip_kin.pipeline.client import PipelineClient
 from manip_kin.pipeline.domain import ensure_ros_isolation, node_environment
 from manip_kin.pipeline.errors import PipelineError
+from manip_kin.pipeline.status import normalize_namespace, status_name
 
 #: Node executables of the pipeline, in start order.
 PIPELINE_NODES = ("robot_state", "cartesian_controller", "trajectory_generator")

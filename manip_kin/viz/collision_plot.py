@@ -45,7 +45,7 @@ class NearestSeries:
 
 def load_nearest(path: str | Path, namespace: str = "") -> NearestSeries:
     """The nearest pair from the controller's statuses in ``namespace`` (empty when there are none)."""
-    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.pipeline.status import normalize_namespace
     from manip_kin.recording import read_messages
 
     name = (normalize_namespace(namespace) + "/cartesian_controller").lstrip("/")

@@ -64,7 +64,7 @@ def recorded_scene(path: str | Path, namespace: str = ""):
     """The obstacles of a recording's ``collision_objects`` at its end (a :class:`~manip_kin.core.scene.Scene`),
     or None when the recording has none; markers that are refused are left out."""
     from manip_kin.core.scene import Scene
-    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.pipeline.status import normalize_namespace
     from manip_kin.recording import read_messages
     from manip_kin.ros.wire.scene_messages import TOPIC, apply_marker_array
 

@@ -162,7 +162,7 @@ def load_run(path: str | Path, namespace: str = "") -> RunData:
     ``namespace`` selects the pipeline (``/left`` reads ``/left/joint_states``...). Topics are
     matched by name and type (:func:`plotted_topics`).
     """
-    from manip_kin.pipeline.client import normalize_namespace
+    from manip_kin.pipeline.status import normalize_namespace
     from manip_kin.recording import RecordingError, read_info, read_messages
 
     prefix = normalize_namespace(namespace)
