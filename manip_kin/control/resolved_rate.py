@@ -43,6 +43,7 @@ from manip_kin.codegen.control_step import compile_step
 from manip_kin.core.damped_least_squares import DampedSolver
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_jacobian import jacobian_entry, zero_joint_column
 from manip_kin.core.pose_rows import Task, parse_task
 from manip_kin.core.rotations import matrix_to_rotvec, rotvec_from_entries
 from manip_kin.errors import InvalidArgumentError, JointCountError, ManipKinError, NonFiniteError
@@ -342,9 +343,8 @@ class CartesianController:
             held[worst_joint] = worst_rate
             qdot[worst_joint] = worst_rate
             for i, r in enumerate(rows):
-                residual[i] -= values[16 + r * n + worst_joint] * worst_rate
-            for r in range(6):
-                reduced[16 + r * n + worst_joint] = 0.0
+                residual[i] -= values[jacobian_entry(n, r, worst_joint)] * worst_rate
+            zero_joint_column(reduced, n, worst_joint)
             if len(held) == n:
                 break
             solved, damping, singular, _ = self._solver.solve(reduced, residual, self._epsilon_sq, self._damping_max_sq)

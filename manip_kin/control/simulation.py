@@ -19,6 +19,7 @@ from manip_kin.control.integration import integrate_joint_rates
 from manip_kin.control.resolved_rate import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_jacobian import jacobian_of
 from manip_kin.core.rotations import check_rotation
 from manip_kin.errors import InvalidArgumentError
 
@@ -115,7 +116,7 @@ class _Recorder:
         self.q[i] = q
         self.qdot[i] = qdot
         self.frame_pose[i] = values[:16].reshape(4, 4)
-        self.twist[i] = values[16:].reshape(6, self._n) @ qdot
+        self.twist[i] = jacobian_of(values, self._n) @ qdot
         self.orientation_error[i] = output.orientation_error
         self.position_error[i] = output.position_error
         self.manipulability[i] = output.manipulability

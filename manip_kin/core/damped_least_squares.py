@@ -25,6 +25,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from manip_kin.codegen.unrolled_linalg import bound_group_sizes, damped_solver, smallest_eigenvalue_bound
+from manip_kin.core.pose_jacobian import jacobian_of
 from manip_kin.errors import NonFiniteError
 
 
@@ -136,7 +137,7 @@ class DampedSolver:
 
     def task_jacobian(self, values: Sequence[float]) -> np.ndarray:
         """The task rows of the Jacobian in a chain output, shape (m, n)."""
-        return np.array(values[16:]).reshape(6, self.dof)[list(self.rows)]
+        return jacobian_of(values, self.dof)[list(self.rows)]
 
     def certified(self, result: tuple, threshold_sq: float) -> bool:
         """True when an unshifted solve's ``(x, det, tr_angular, tr_linear, tr⁻¹)`` proves

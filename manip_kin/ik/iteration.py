@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from manip_kin.core.pose_jacobian import zero_joint_column
 from manip_kin.errors import NonFiniteError
 from manip_kin.ik.problem import IKProblem
 
@@ -135,8 +136,7 @@ def general_iteration(
         n = problem.n
         values = list(values)
         for j in held:
-            for r in range(6):
-                values[16 + r * n + j] = 0.0
+            zero_joint_column(values, n, j)
     if method == "lm":
         shift = LM_ERROR_WEIGHT * (orientation * orientation + position * position) + damping
         result = problem.solve(values, error, shift)

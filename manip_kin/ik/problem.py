@@ -16,6 +16,7 @@ from manip_kin.control.resolved_rate import _pose_error_values
 from manip_kin.core.damped_least_squares import DampedSolver
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_jacobian import jacobian_entry
 from manip_kin.core.pose_rows import Task
 from manip_kin.ik.seeds import SeedTable
 
@@ -104,7 +105,7 @@ class IKProblem:
         for j in self.clipped:
             at_lower, at_upper = q[j] <= self.lower[j], q[j] >= self.upper[j]
             if at_lower or at_upper:
-                gradient = sum(values[16 + r * n + j] * error[i] for i, r in enumerate(rows))
+                gradient = sum(values[jacobian_entry(n, r, j)] * error[i] for i, r in enumerate(rows))
                 if (at_lower and gradient < 0.0) or (at_upper and gradient > 0.0):
                     held.append(j)
         return held

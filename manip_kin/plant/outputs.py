@@ -15,6 +15,7 @@ import numpy as np
 
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_jacobian import jacobian_row, pose_of
 
 
 class ChainOutputs:
@@ -54,10 +55,10 @@ class ChainOutputs:
     def _update_kinematics(self) -> None:
         n = self._n
         values = self._tool_chain(self.q_values)
-        tool = values[:16]
+        tool = pose_of(values)
         qdot = self.qdot_values
         # Twist of the tool (ee when no tool) = J q̇, J rows [angular; linear] after the pose.
-        twist = [sum(map(mul, values[16 + r * n : 16 + (r + 1) * n], qdot)) for r in range(6)]
+        twist = [sum(map(mul, jacobian_row(values, n, r), qdot)) for r in range(6)]
         self.tool_values = tool
         self.tool_twist_values = twist
         if self._ee_chain is None:

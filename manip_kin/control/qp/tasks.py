@@ -24,6 +24,7 @@ import numpy as np
 from manip_kin.control.resolved_rate import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
+from manip_kin.core.pose_jacobian import jacobian_of
 from manip_kin.errors import InvalidArgumentError
 
 
@@ -60,7 +61,7 @@ class PoseTask:
         """The task rows of the controlled frame's geometric Jacobian, shape (m, n)."""
         n = self.model.dof
         values = compiled_kinematics(self.model, self.law.frame_index, True)(q.tolist())
-        return np.fromiter(values[16:], float, 6 * n).reshape(6, n)[self._row_index]
+        return jacobian_of(values, n)[self._row_index]
 
 
 @dataclass(frozen=True)
