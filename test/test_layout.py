@@ -17,6 +17,7 @@ TEST_ROOT = Path(__file__).resolve().parent
 #: The wings from the bottom up: a module may import its own wing and the wings below it.
 WINGS = (
     "errors",
+    "cdr",
     "codegen",
     "core",
     "collision",

@@ -13,6 +13,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
+from manip_kin.cdr import CdrReader, CdrWriter, stamp_parts
 from manip_kin.core.tf_tree import LinkTransform
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 
@@ -20,9 +21,8 @@ TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 
-_ENCAPSULATION_LE = b"\x00\x01\x00\x00"
-_U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
+_COUNT = struct.Struct("<I")
 _SEVEN_DOUBLES = struct.Struct("<7d")
 
 
@@ -41,31 +41,19 @@ def tf_offer(static: bool) -> OfferedProfiles:
     return default_offer(transient_local=static, depth=1 if static else 100)
 
 
-def _align(position: int, size: int) -> int:
-    return (position + size - 1) & ~(size - 1)
-
-
-def _append_string(body: bytearray, text: str) -> None:
-    encoded = text.encode("utf-8") + b"\x00"
-    body.extend(b"\x00" * (_align(len(body), 4) - len(body)))
-    body.extend(_U32.pack(len(encoded)))
-    body.extend(encoded)
-
-
 def encode_tf_message(stamp_ns: int, transforms: Sequence[LinkTransform]) -> bytes:
     """CDR bytes of a TFMessage whose every transform is stamped ``stamp_ns`` [ns since epoch]."""
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    body = bytearray(_U32.pack(len(transforms)))  # positions count from here (after encapsulation)
+    sec, nanosec = stamp_parts(stamp_ns)
+    writer = CdrWriter()
+    writer.pack(_COUNT, len(transforms), alignment=4)
     for transform in transforms:
-        body.extend(b"\x00" * (_align(len(body), 4) - len(body)))
-        body.extend(_STAMP.pack(sec, nanosec))
-        _append_string(body, transform.parent)
-        _append_string(body, transform.child)
-        body.extend(b"\x00" * (_align(len(body), 8) - len(body)))
+        writer.pack(_STAMP, sec, nanosec, alignment=4)
+        writer.string(transform.parent)
+        writer.string(transform.child)
         x, y, z = (float(v) for v in transform.translation)
         qx, qy, qz, qw = (float(v) for v in transform.rotation_xyzw)
-        body.extend(_SEVEN_DOUBLES.pack(x, y, z, qx, qy, qz, qw))
-    return _ENCAPSULATION_LE + bytes(body)
+        writer.pack(_SEVEN_DOUBLES, x, y, z, qx, qy, qz, qw, alignment=8)
+    return writer.bytes()
 
 
 def decode_tf_message(data: bytes) -> list[tuple[int, LinkTransform]]:
@@ -76,33 +64,14 @@ def decode_tf_message(data: bytes) -> list[tuple[int, LinkTransform]]:
     """
     import numpy as np
 
-    if len(data) < 8 or data[0] != 0 or data[1] > 1:
-        raise ValueError("not a plain CDR buffer")
-    order = "<" if data[1] == 1 else ">"
-    body = memoryview(data)[4:]
-    position = 0
-
-    def read(fmt: str, size: int, align: int):
-        nonlocal position
-        position = _align(position, align)
-        values = struct.unpack_from(order + fmt, body, position)
-        position += size
-        return values
-
-    def read_string() -> str:
-        nonlocal position
-        (length,) = read("I", 4, 4)
-        text = bytes(body[position : position + length - 1]).decode("utf-8")
-        position += length
-        return text
-
-    (count,) = read("I", 4, 4)
+    reader = CdrReader(data)
+    (count,) = reader.read("I", 4, 4)
     result = []
     for _ in range(count):
-        sec, nanosec = read("iI", 8, 4)
-        parent = read_string()
-        child = read_string()
-        x, y, z, qx, qy, qz, qw = read("7d", 56, 8)
+        sec, nanosec = reader.read("iI", 8, 4)
+        parent = reader.string()
+        child = reader.string()
+        x, y, z, qx, qy, qz, qw = reader.read("7d", 56, 8)
         transform = LinkTransform(parent, child, np.array([x, y, z]), np.array([qx, qy, qz, qw]))
         result.append((sec * 1_000_000_000 + nanosec, transform))
     return result

@@ -19,51 +19,12 @@ from typing import NamedTuple
 import numpy as np
 from std_msgs.msg import Float64MultiArray
 
+from manip_kin.cdr import CDR_LE, CdrLayout, align, stamp_parts
 from manip_kin.core.rotations import matrix_to_quat, quaternion_from_entries
 from manip_kin.errors import ProblemKind
 from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper
 
 _NS_PER_S = 1_000_000_000
-_CDR_LE = b"\x00\x01\x00\x00"  # encapsulation: CDR, little endian
-
-
-class _CdrLayout:
-    """Builds a ``struct`` format with CDR alignment (relative to the payload start)."""
-
-    def __init__(self):
-        self.parts = ["<4s"]  # the encapsulation header, not part of the aligned payload
-        self.offset = 0
-
-    def align(self, size: int) -> None:
-        pad = (-self.offset) % size
-        if pad:
-            self.parts.append(f"{pad}x")
-            self.offset += pad
-
-    def add(self, code: str, size: int, count: int = 1) -> None:
-        self.align(size)
-        self.parts.append(f"{count}{code}" if count != 1 else code)
-        self.offset += size * count
-
-    def add_string(self, text: str) -> bytes:
-        data = text.encode() + b"\x00"
-        self.add("I", 4)
-        self.parts.append(f"{len(data)}s")
-        self.offset += len(data)
-        return data
-
-    def header(self, frame_id: str) -> bytes:
-        """``std_msgs/Header``: stamp (sec, nanosec), then frame_id; returns the frame bytes."""
-        self.add("i", 4)
-        self.add("I", 4)
-        return self.add_string(frame_id)
-
-    def compile(self) -> struct.Struct:
-        return struct.Struct("".join(self.parts))
-
-
-def _stamp_parts(stamp_ns: int) -> tuple[int, int]:
-    return divmod(int(stamp_ns), _NS_PER_S)
 
 
 def quaternion_of_pose_values(values) -> tuple[float, float, float, float]:
@@ -81,7 +42,7 @@ class PoseStampedCdr:
     """
 
     def __init__(self, frame_id: str):
-        layout = _CdrLayout()
+        layout = CdrLayout()
         self._frame = layout.header(frame_id)
         self._frame_length = len(self._frame)
         layout.add("d", 8, 7)
@@ -89,17 +50,17 @@ class PoseStampedCdr:
 
     def encode(self, stamp_ns: int, matrix: np.ndarray) -> bytes:
         """CDR bytes of the pose ``matrix`` (4x4) stamped ``stamp_ns`` [ns since epoch]."""
-        sec, nanosec = _stamp_parts(stamp_ns)
+        sec, nanosec = stamp_parts(stamp_ns)
         qx, qy, qz, qw = matrix_to_quat(matrix[:3, :3]).tolist()
         x, y, z = matrix[:3, 3].tolist()
-        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, x, y, z, qx, qy, qz, qw)
+        return self._struct.pack(CDR_LE, sec, nanosec, self._frame_length, self._frame, x, y, z, qx, qy, qz, qw)
 
     def encode_values(self, stamp_ns: int, values) -> bytes:
         """CDR bytes of a pose given as 16 row-major floats (the unrolled kinematics' output)."""
-        sec, nanosec = _stamp_parts(stamp_ns)
+        sec, nanosec = stamp_parts(stamp_ns)
         qx, qy, qz, qw = quaternion_of_pose_values(values)
         return self._struct.pack(
-            _CDR_LE, sec, nanosec, self._frame_length, self._frame, values[3], values[7], values[11], qx, qy, qz, qw
+            CDR_LE, sec, nanosec, self._frame_length, self._frame, values[3], values[7], values[11], qx, qy, qz, qw
         )
 
 
@@ -107,7 +68,7 @@ class TwistStampedCdr:
     """Serialised ``geometry_msgs/TwistStamped`` with a fixed frame id."""
 
     def __init__(self, frame_id: str):
-        layout = _CdrLayout()
+        layout = CdrLayout()
         self._frame = layout.header(frame_id)
         self._frame_length = len(self._frame)
         layout.add("d", 8, 6)
@@ -115,16 +76,16 @@ class TwistStampedCdr:
 
     def encode(self, stamp_ns: int, angular: np.ndarray, linear: np.ndarray) -> bytes:
         """CDR bytes of ``linear`` [m/s] and ``angular`` [rad/s] velocity stamped ``stamp_ns``."""
-        sec, nanosec = _stamp_parts(stamp_ns)
+        sec, nanosec = stamp_parts(stamp_ns)
         return self._struct.pack(
-            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *linear.tolist(), *angular.tolist()
+            CDR_LE, sec, nanosec, self._frame_length, self._frame, *linear.tolist(), *angular.tolist()
         )
 
     def encode_values(self, stamp_ns: int, twist) -> bytes:
         """CDR bytes of a twist given as 6 floats ``(wx, wy, wz, vx, vy, vz)``."""
-        sec, nanosec = _stamp_parts(stamp_ns)
+        sec, nanosec = stamp_parts(stamp_ns)
         wx, wy, wz, vx, vy, vz = twist
-        return self._struct.pack(_CDR_LE, sec, nanosec, self._frame_length, self._frame, vx, vy, vz, wx, wy, wz)
+        return self._struct.pack(CDR_LE, sec, nanosec, self._frame_length, self._frame, vx, vy, vz, wx, wy, wz)
 
 
 class JointStateCdr:
@@ -138,7 +99,7 @@ class JointStateCdr:
     """
 
     def __init__(self, names: Sequence[str], frame_id: str = "", with_effort: bool = False):
-        layout = _CdrLayout()
+        layout = CdrLayout()
         self._frame = layout.header(frame_id)
         self._frame_length = len(self._frame)
         layout.add("I", 4)
@@ -167,11 +128,11 @@ class JointStateCdr:
 
     def encode_values(self, stamp_ns: int, position, velocity, effort=None) -> bytes:
         """CDR bytes of positions, velocities (and efforts when built with them) as float sequences of length n."""
-        sec, nanosec = _stamp_parts(stamp_ns)
+        sec, nanosec = stamp_parts(stamp_ns)
         n = self._count
         if self._with_effort:
             return self._struct.pack(
-                _CDR_LE,
+                CDR_LE,
                 sec,
                 nanosec,
                 self._frame_length,
@@ -185,7 +146,7 @@ class JointStateCdr:
                 *effort,
             )
         return self._struct.pack(
-            _CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names, n, *position, n, *velocity, 0
+            CDR_LE, sec, nanosec, self._frame_length, self._frame, *self._names, n, *position, n, *velocity, 0
         )
 
 
@@ -193,7 +154,7 @@ class Float64ArrayCdr:
     """Serialised ``std_msgs/Float64MultiArray`` of ``size`` values with an empty layout."""
 
     def __init__(self, size: int):
-        layout = _CdrLayout()
+        layout = CdrLayout()
         layout.add("I", 4)  # layout.dim: empty sequence
         layout.add("I", 4)  # layout.data_offset
         layout.add("I", 4)  # data length
@@ -205,15 +166,11 @@ class Float64ArrayCdr:
     def encode(self, values: np.ndarray | list[float]) -> bytes:
         """CDR bytes of ``values``, shape (size,) (an array, or a list of floats)."""
         return self._struct.pack(
-            _CDR_LE, 0, 0, self._size, *(values.tolist() if isinstance(values, np.ndarray) else values)
+            CDR_LE, 0, 0, self._size, *(values.tolist() if isinstance(values, np.ndarray) else values)
         )
 
 
 # --- decoding the 1 kHz inputs from their CDR bytes ---------------------------------------------
-
-
-def _align(offset: int, size: int) -> int:
-    return offset + (-offset) % size
 
 
 class JointStateSample(NamedTuple):
@@ -290,21 +247,21 @@ class JointStateDecoder:
     def _learn(self, data: bytes) -> None:
         # Payload offsets (after the 4-byte encapsulation): stamp 0..8, frame_id at 8.
         (frame_length,) = struct.unpack_from("<I", data, 4 + 8)
-        offset = _align(8 + 4 + frame_length, 4)
+        offset = align(8 + 4 + frame_length, 4)
         (name_count,) = struct.unpack_from("<I", data, 4 + offset)
         offset += 4
         for _ in range(name_count):
-            offset = _align(offset, 4)
+            offset = align(offset, 4)
             (length,) = struct.unpack_from("<I", data, 4 + offset)
             offset += 4 + length
         self._blob = bytes(data[12 : 4 + offset])
-        count_offset = _align(offset, 4)
-        values_offset = _align(count_offset + 4, 8)
+        count_offset = align(offset, 4)
+        values_offset = align(count_offset + 4, 8)
         velocity_count_offset = values_offset + 8 * self._count  # 8-aligned, so 4-aligned
         self._count_at = 4 + count_offset
         self._values_at = 4 + values_offset
         self._velocity_count_at = 4 + velocity_count_offset
-        self._velocity_values_at = 4 + _align(velocity_count_offset + 4, 8)
+        self._velocity_values_at = 4 + align(velocity_count_offset + 4, 8)
 
 
 class _Time(NamedTuple):
@@ -358,9 +315,9 @@ def decode_pose_stamped(data: bytes, what: str = "goal pose"):
     else goes through ``deserialize_message`` (the rclpy message, or
     :class:`InvalidMessageError` naming ``what`` for bytes that do not decode).
     """
-    if len(data) >= 16 and data[:4] == _CDR_LE:
+    if len(data) >= 16 and data[:4] == CDR_LE:
         sec, nanosec, length = _STAMP_AND_STRING_LENGTH.unpack_from(data, 4)
-        values_at = 4 + _align(12 + length, 8)
+        values_at = 4 + align(12 + length, 8)
         # A CDR string: its length counts the terminating NUL, which must be there.
         if length >= 1 and len(data) >= values_at + _POSE_VALUES.size and data[16 + length - 1] == 0:
             try:
