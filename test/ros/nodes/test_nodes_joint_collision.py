@@ -19,11 +19,15 @@ from test_nodes_collision import (
     _box_marker,
     _reported,
 )
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.robots import load_robot
+from manip_kin.motion.joint_trajectory import TrajectoryPoint
 from manip_kin.pipeline.outcome import goal_outcome
+from manip_kin.ros.nodes.trajectory_generator import TrajectoryGeneratorNode
+from manip_kin.ros.wire.joint_messages import make_joint_trajectory
 from manip_kin.ros.wire.messages import make_joint_state, stamp_key
 
 #: Too tall for the arm to pass over or under: a joint reference across it is blocked.
@@ -117,5 +121,30 @@ def test_a_jog_into_an_obstacle_stops_at_the_safety_distance(harness, ball_urdf)
         nearest, last = _nearest(model, hardware, centre)
         assert nearest >= SAFETY - 1e-3, nearest
         assert last < SAFETY + 0.01  # it went up to the pillar
+    finally:
+        hardware.close()
+
+
+def test_a_joint_trajectory_through_an_obstacle_stops_short_and_ends_blocked(harness, ball_urdf):
+    """As ``manip_kin move`` does it: trajectory_generator (its own collision check off) streams
+    joint_reference samples to the controller."""
+    model, hardware, node, _, centre = _start_with_pillar(harness, ball_urdf, gain_joint=3.0)
+    try:
+        namespace = node.test_namespace
+        generator = harness.start(TrajectoryGeneratorNode, namespace=namespace, robot=ball_urdf, rate_hz=250.0)
+        harness.wait_matched(f"{namespace}/joint_trajectory", JointTrajectory)
+        # The generator reads the newest joint state when a trajectory comes: let the arm's arrive first.
+        assert harness.spin_until(lambda: hardware._joint_states.get_subscription_count() > 1, 5)
+        harness.spin_for(0.1)
+        trajectory = make_joint_trajectory(model.joint_names, [TrajectoryPoint(2.0, GOAL_Q.tolist())])
+        trajectory.header.stamp = harness.node.get_clock().now().to_msg()
+        harness.publish(f"{namespace}/joint_trajectory", trajectory)
+        assert harness.spin_until(lambda: generator.state == "streaming", 5), generator.state
+        assert harness.spin_until(lambda: node.state == "blocked", 10), (node.state, node.detail)
+        assert "obstacle:cell/1" in node.detail and node.supervisor.goal_kind == "joint"
+        assert harness.spin_until(lambda: node.command_filter.at_rest, 3)
+        nearest, last = _nearest(model, hardware, centre)
+        assert nearest >= SAFETY - 1e-3, nearest
+        assert last < SAFETY + 0.01  # it went up to the pillar and stopped there
     finally:
         hardware.close()
