@@ -1,9 +1,11 @@
-"""The collision-aware cartesian law: tasks and limits solved as one small QP per cycle.
+"""The collision-aware law: tasks and limits solved as one small QP per cycle.
 
-Per cycle (:meth:`QpController.step`):
+Per cycle (:meth:`QpController.step` for a pose goal, :meth:`QpController.joint_step` for a
+joint reference or a jog):
 
 1. the tasks give the rates ``q̇*`` they ask for and the metric ``H``
-   (:mod:`manip_kin.control.qp.tasks`): today's law, plus the null-space posture if any;
+   (:mod:`manip_kin.control.qp.tasks`): today's cartesian law, plus the null-space posture if
+   any, in the pose task's metric; or the joint tracking law, in the joint-space metric ``H = I``;
 2. the box limits give ``lower <= q̇ <= upper`` and the collision limit its damper rows
    ``A q̇ <= b`` (:mod:`manip_kin.control.qp.limits`);
 3. if ``q̇*`` satisfies them all, it is the answer (no solve: the usual case away from
@@ -11,7 +13,8 @@ Per cycle (:meth:`QpController.step`):
    solves ``min ½ (q̇ − q̇*)ᵀ H (q̇ − q̇*)`` under them: the arm slows as it approaches an
    obstacle and slides along it where the task allows;
 4. if the QP is infeasible or the solver fails, today's law
-   (:meth:`manip_kin.control.resolved_rate.CartesianController.step`, with its own position and velocity
+   (:meth:`manip_kin.control.resolved_rate.CartesianController.step`, or
+   :func:`manip_kin.control.joint_tracking.joint_tracking_step`, with its own position and velocity
    limits) is the fallback, scaled down so it does not close any damped pair faster than the
    damper allows (not at all on a pair already inside the safety distance). Fallbacks are
    counted (:attr:`QpController.fallback_count`) and flagged in the output.
@@ -27,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.collision.distances import CollisionChecker
+from manip_kin.collision.distances import CollisionChecker, DamperRows
+from manip_kin.control.joint_tracking import JointTrackingOutput, joint_tracking_step
 from manip_kin.control.qp.limits import (
     AccelerationLimit,
     Box,
@@ -37,7 +41,7 @@ from manip_kin.control.qp.limits import (
     merge_boxes,
 )
 from manip_kin.control.qp.solver import SolveStatus, solve_qp
-from manip_kin.control.qp.tasks import PoseTask, PostureTask
+from manip_kin.control.qp.tasks import JointTask, PoseTask, PostureTask
 from manip_kin.control.resolved_rate import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.core.model import RobotModel
 from manip_kin.errors import InvalidArgumentError
@@ -79,9 +83,9 @@ class QpConfig:
             raise InvalidArgumentError(f"regularization = {self.regularization!r}; valid: a finite number > 0")
 
 
-@dataclass(frozen=True)
-class QpOutput(ControlOutput):
-    """A :class:`~manip_kin.control.resolved_rate.ControlOutput` with what the QP saw.
+@dataclass(frozen=True, kw_only=True)
+class QpReport:
+    """What the QP saw in one cycle (the part of :class:`QpOutput` and :class:`QpJointOutput` they share).
 
     Attributes:
         nearest_pair: the nearest pair within the influence distance, or None.
@@ -104,6 +108,32 @@ class QpOutput(ControlOutput):
     def active_collision_pairs(self) -> tuple[str, ...]:
         """The ``first-second`` labels of the binding collision constraints."""
         return tuple(name.partition(":")[2] for name in self.active_constraints if name.startswith("collision:"))
+
+
+@dataclass(frozen=True)
+class QpOutput(ControlOutput, QpReport):
+    """A pose step: a :class:`~manip_kin.control.resolved_rate.ControlOutput` with what the QP saw
+    (:class:`QpReport`)."""
+
+
+@dataclass(frozen=True)
+class QpJointOutput(JointTrackingOutput, QpReport):
+    """A joint step: a :class:`~manip_kin.control.joint_tracking.JointTrackingOutput` with what the QP
+    saw (:class:`QpReport`); ``limited_joints`` are those held by the QP's position limit."""
+
+    @property
+    def joint_error_norm(self) -> float:
+        """``‖q_ref − q‖``, the distance to the reference in joint space [rad | m]."""
+        return float(math.sqrt(float(self.joint_error @ self.joint_error)))
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """One cycle's limits: the merged box, the acceleration box in it (or None), the damper rows."""
+
+    box: Box
+    acceleration: Box | None
+    rows: DamperRows | None
 
 
 class QpController:
@@ -146,6 +176,7 @@ class QpController:
         self._names = model.joint_names
         self._unbounded = Box(np.full(model.dof, -math.inf), np.full(model.dof, math.inf))
         self._identity = np.eye(model.dof)
+        self._joint_task: JointTask | None = None
 
     def reset(self, qdot: np.ndarray | None = None) -> None:
         """Set the previous command the acceleration limit starts from (default: at rest)."""
@@ -183,20 +214,88 @@ class QpController:
         if self.posture is not None:
             jacobian = self.pose_task.jacobian(q)
             desired = desired + self.posture.null_space_rates(q, jacobian, task.damping)
+
+        def metric() -> np.ndarray:
+            task_jacobian = self.pose_task.jacobian(q) if jacobian is None else jacobian
+            mu = max(task.damping * task.damping, self.config.regularization)
+            return task_jacobian.T @ task_jacobian + mu * self._identity
+
+        qdot, status, bounds = self._solve(q, dt, desired, metric)
+        extra = {}
+        if qdot is None:
+            task = self.fallback_law.step(q, goal_pose, goal_twist, dt)  # today's law, with its limits
+            qdot, extra = self._damped(task.qdot, bounds.rows), self._fallen_back(task)
+            bounds = _Bounds(self._unbounded, None, bounds.rows)
+        report = self._report(qdot, status, bounds, **extra)
+        return QpOutput(
+            qdot=qdot,
+            orientation_error=task.orientation_error,
+            position_error=task.position_error,
+            manipulability=task.manipulability,
+            damping=task.damping,
+            singular=task.singular,
+            **report,
+        )
+
+    def joint_step(
+        self,
+        q: np.ndarray,
+        q_reference: np.ndarray,
+        qdot_reference: np.ndarray | None = None,
+        gain: float = 1.0,
+        dt: float = 0.002,
+    ) -> QpJointOutput:
+        """Joint rates towards a joint reference within every limit: ``min ‖q̇ − q̇*‖²`` with
+        ``q̇* = q̇_ref + K (q_ref − q)`` (:class:`~manip_kin.control.qp.tasks.JointTask`); the
+        posture task, if any, does not apply (the reference fixes every joint).
+
+        Args:
+            q, q_reference: joint positions and the reference, shapes (n,) [rad | m].
+            qdot_reference: the reference's velocity (feed-forward), shape (n,), or None (zero).
+            gain: K [1/s], >= 0.
+            dt: control period [s], > 0.
+
+        Raises:
+            InputError: as :func:`~manip_kin.control.joint_tracking.joint_tracking_step` for bad input,
+                or a gain that is not a finite rate >= 0.
+        """
+        if self._joint_task is None or self._joint_task.gain != gain:
+            self._joint_task = JointTask(self.model, gain)
+        task = self._joint_task.desired(q, q_reference, qdot_reference, dt)  # checks q, the reference, dt
+        q = np.asarray(q, dtype=float)
+        qdot, status, bounds = self._solve(q, dt, task.qdot, lambda: self._identity)
+        extra = {}
+        if qdot is None:
+            config = self.config.controller
+            law = joint_tracking_step(  # today's joint law, with its limits
+                self.model,
+                q,
+                q_reference,
+                qdot_reference,
+                gain,
+                dt,
+                config.respect_position_limits,
+                config.respect_velocity_limits,
+            )
+            qdot, extra = self._damped(law.qdot, bounds.rows), self._fallen_back(law)
+            bounds = _Bounds(self._unbounded, None, bounds.rows)
+        return QpJointOutput(qdot=qdot, joint_error=task.joint_error, **self._report(qdot, status, bounds, **extra))
+
+    def _solve(
+        self, q: np.ndarray, dt: float, desired: np.ndarray, metric
+    ) -> tuple[np.ndarray | None, SolveStatus, _Bounds]:
+        """The rates nearest ``desired`` in the metric ``metric()`` (called only when a limit
+        binds) within this cycle's limits; None when the QP is infeasible or the solver fails."""
         box, acceleration = self.limits_box(q, dt)
         rows = self.collision_limit.rows(q) if self.collision_limit is not None else None
+        bounds = _Bounds(box, acceleration, rows)
         matrix = rows.matrix if rows is not None else None
         bound = rows.bound if rows is not None else None
         if self._satisfies(desired, box, matrix, bound):
-            return self._output(task, desired, SolveStatus.UNCONSTRAINED, box, acceleration, rows)
-        if jacobian is None:
-            jacobian = self.pose_task.jacobian(q)
-        mu = max(task.damping * task.damping, self.config.regularization)
-        hessian = jacobian.T @ jacobian + mu * self._identity
+            return desired, SolveStatus.UNCONSTRAINED, bounds
+        hessian = metric()
         solution = solve_qp(hessian, -hessian @ desired, box.lower, box.upper, matrix, bound)
-        if solution.x is not None:
-            return self._output(task, solution.x, solution.status, box, acceleration, rows)
-        return self._fallback(q, goal_pose, goal_twist, dt, solution.status, rows)
+        return solution.x, solution.status, bounds
 
     @staticmethod
     def _satisfies(qdot: np.ndarray, box: Box, matrix, bound) -> bool:
@@ -204,10 +303,9 @@ class QpController:
             return False
         return matrix is None or not len(matrix) or bool((bound - matrix @ qdot).min() >= -ACTIVE_TOLERANCE)
 
-    def _active(
-        self, qdot: np.ndarray, box: Box, acceleration: Box | None, rows
-    ) -> tuple[tuple[str, ...], tuple[int, ...]]:
+    def _active(self, qdot: np.ndarray, bounds: _Bounds) -> tuple[tuple[str, ...], tuple[int, ...]]:
         """Names of the binding constraints, and the joints held by a position limit."""
+        box, acceleration, rows = bounds.box, bounds.acceleration, bounds.rows
         names: list[str] = []
         at_bound = (qdot <= box.lower + ACTIVE_TOLERANCE) | (qdot >= box.upper - ACTIVE_TOLERANCE)
         held: list[int] = []
@@ -228,47 +326,36 @@ class QpController:
             names += [f"collision:{label}" for label, on in zip(rows.labels, binding) if on]
         return tuple(names), tuple(held)
 
-    def _output(self, task: ControlOutput, qdot: np.ndarray, status, box, acceleration, rows, **extra) -> QpOutput:
+    def _report(self, qdot: np.ndarray, status: SolveStatus, bounds: _Bounds, **extra) -> dict:
+        """The fields an output shares (:class:`QpReport`, ``velocity_scale``, ``limited_joints``);
+        keeps ``qdot`` as the previous command."""
         # Unconstrained: the tasks' own rates satisfied every limit, so none binds.
-        active, held = ((), ()) if status is SolveStatus.UNCONSTRAINED else self._active(qdot, box, acceleration, rows)
+        active, held = ((), ()) if status is SolveStatus.UNCONSTRAINED else self._active(qdot, bounds)
         self._previous = qdot
-        nearest = rows.nearest if rows is not None else None
-        return QpOutput(
-            qdot=qdot,
-            orientation_error=task.orientation_error,
-            position_error=task.position_error,
-            manipulability=task.manipulability,
-            damping=task.damping,
-            velocity_scale=extra.pop("velocity_scale", 1.0),
-            limited_joints=extra.pop("limited_joints", held),
-            singular=task.singular,
-            nearest_pair=nearest.pair if nearest is not None else None,
-            nearest_distance=nearest.distance if nearest is not None else math.inf,
-            active_constraints=active,
-            fallback_count=self.fallback_count,
-            status=status,
+        nearest = bounds.rows.nearest if bounds.rows is not None else None
+        return {
+            "velocity_scale": 1.0,
+            "limited_joints": held,
+            "nearest_pair": nearest.pair if nearest is not None else None,
+            "nearest_distance": nearest.distance if nearest is not None else math.inf,
+            "active_constraints": active,
+            "fallback_count": self.fallback_count,
+            "status": status,
             **extra,
-        )
+        }
 
-    def _fallback(self, q, goal_pose, goal_twist, dt, status, rows) -> QpOutput:
-        """Today's law, scaled so no damped pair closes faster than its damper allows."""
+    def _fallen_back(self, law) -> dict:
+        """Count a fallback to today's ``law`` output; the fields it sets in the output."""
         self.fallback_count += 1
-        law = self.fallback_law.step(q, goal_pose, goal_twist, dt)
-        qdot = law.qdot
+        return {"fallback": True, "velocity_scale": law.velocity_scale, "limited_joints": law.limited_joints}
+
+    @staticmethod
+    def _damped(qdot: np.ndarray, rows: DamperRows | None) -> np.ndarray:
+        """``qdot`` scaled so no damped pair closes faster than its damper allows."""
         if rows is not None and len(rows.labels):
             speeds = rows.matrix @ qdot
             allowed = np.maximum(rows.bound, 0.0)
             closing = speeds > allowed
             if np.any(closing):
                 qdot = qdot * float(np.min(allowed[closing] / speeds[closing]))
-        return self._output(
-            law,
-            qdot,
-            status,
-            self._unbounded,
-            None,
-            rows,
-            fallback=True,
-            velocity_scale=law.velocity_scale,
-            limited_joints=law.limited_joints,
-        )
+        return qdot

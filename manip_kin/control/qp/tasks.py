@@ -12,6 +12,10 @@ rates ``q̇*`` the tasks ask for with no limit in the way.
   ``N = I − Jᵀ(J Jᵀ + λ² I)⁻¹ J`` (the null-space projector of the damped pseudo-inverse):
   the minimiser of ``‖J q̇ − v*‖² + λ²‖q̇ − z‖²``, so the posture moves only the joints' self-motion
   and never disturbs the pose task. For arms with no redundancy (n <= task rows) it does nothing.
+* :class:`JointTask`, for joint references and jogs instead of a pose goal: ``q̇* = q̇_ref + K (q_ref − q)``,
+  the joint tracking law (:func:`manip_kin.control.joint_tracking.joint_tracking_step` without its
+  limit handling), and ``H = I``: the QP finds the rates nearest to it in joint space, so with
+  no limit active its answer *is* the joint tracking law.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from manip_kin.control.joint_tracking import JointTrackingOutput, joint_tracking_step
 from manip_kin.control.resolved_rate import CartesianController, ControllerConfig, ControlOutput
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
@@ -104,3 +109,36 @@ class PostureTask:
             return np.zeros(n)
         gram = jacobian @ jacobian.T + damping * damping * np.eye(m)
         return z - jacobian.T @ np.linalg.solve(gram, jacobian @ z)
+
+
+@dataclass(frozen=True)
+class JointTask:
+    """A joint reference followed directly (no pose goal): the joint tracking law as the cost.
+
+    Attributes:
+        model: the robot.
+        gain: K [1/s], >= 0 (``gain_joint``): a constant offset decays as ``exp(−K t)``.
+    """
+
+    model: RobotModel
+    gain: float = 1.0
+
+    def __post_init__(self):
+        if not (isinstance(self.gain, (int, float)) and math.isfinite(self.gain) and self.gain >= 0):
+            raise InvalidArgumentError(f"joint gain {self.gain!r}; valid: a finite rate >= 0 [1/s]")
+
+    def desired(
+        self, q: np.ndarray, q_reference: np.ndarray, qdot_reference: np.ndarray | None, dt: float
+    ) -> JointTrackingOutput:
+        """The joint tracking law without limits at ``q``: ``qdot`` is ``q̇*``, shape (n,) [rad/s | m/s].
+
+        Args:
+            q, q_reference: joint positions and their reference, shapes (n,) [rad | m].
+            qdot_reference: the reference's velocity (feed-forward), shape (n,), or None (zero).
+            dt: control period [s], > 0.
+
+        Raises:
+            InputError: as :func:`~manip_kin.control.joint_tracking.joint_tracking_step` for bad input.
+        """
+        # The limits are the QP's: the law's own clipping and scaling stay off.
+        return joint_tracking_step(self.model, q, q_reference, qdot_reference, self.gain, dt, False, False)

@@ -439,7 +439,7 @@ class CartesianControllerNode(LoopingNode):
                 elif kind is GoalKind.JOG:
                     config = self.controller.config
                     self.joint_output = self.servo.jog_step(
-                        q, now_ns, self.dt, self.limit_horizon, self.gain_joint, config
+                        q, now_ns, self.dt, self.limit_horizon, self.gain_joint, config, self.collision.joint_law
                     )
                     target = self.joint_output.qdot
                     supervisor.servo_step_done(self.joint_output.limited_joints, False, 1.0)
@@ -537,27 +537,35 @@ class CartesianControllerNode(LoopingNode):
             offset = (instant_ns - self._reference_stamp_ns) * 1e-9
             if abs(offset) <= MAX_STATE_AGE_PERIODS * self.dt:
                 q_reference = advance_reference(q_reference, qdot_reference, offset)
-        output = joint_tracking_step(
-            self.model,
-            q,
-            q_reference,
-            qdot_reference if fresh else None,
-            self.gain_joint,
-            self.limit_horizon,
-            self.controller.config.respect_position_limits,
-            self.controller.config.respect_velocity_limits,
-        )
+        qdot_reference = qdot_reference if fresh else None
+        law = self.collision.joint_law
+        if law is None:
+            output = joint_tracking_step(
+                self.model,
+                q,
+                q_reference,
+                qdot_reference,
+                self.gain_joint,
+                self.limit_horizon,
+                self.controller.config.respect_position_limits,
+                self.controller.config.respect_velocity_limits,
+            )
+        else:  # collision avoidance: the same law, as a QP within the collision limit
+            output = law.joint_step(q, q_reference, qdot_reference, self.gain_joint)
         self.joint_output = output
         self.supervisor.joint_step_done(output, fresh, now_ns)
+        if law is not None:
+            self.supervisor.collision_blocked(self.collision.joint_step_done(output, now_ns))
         return output.qdot
 
     def _publish_diagnostics(self, now_ns: int) -> None:
         supervisor = self.supervisor
+        # Blocked: the errors where the arm was held off, for the outcome's words.
+        held_off = supervisor.state is ControllerState.BLOCKED
+        joint_space = supervisor.goal_kind in (GoalKind.JOINT, GoalKind.JOG)
         if supervisor.goal_kind is GoalKind.JOINT:
-            values = self._joint_values(supervisor.active and self.joint_output is not None)
+            values = self._joint_values((supervisor.active or held_off) and self.joint_output is not None)
         else:
-            # Blocked: the errors where the arm was held off, for the outcome's words.
-            held_off = supervisor.state is ControllerState.BLOCKED
             values = self._pose_values((supervisor.active or held_off) and self.output is not None)
         values += [
             ("goal_kind", supervisor.goal_kind or ""),
@@ -582,7 +590,7 @@ class CartesianControllerNode(LoopingNode):
             ("braking_joints", ",".join(self.model.joint_names[i] for i in self.command_filter.braking_joints)),
             ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),
             ("loop_error", self.loop_error()),
-            *self.collision.report(self.get_clock().now().to_msg(), self.output),
+            *self.collision.report(self.get_clock().now().to_msg(), self.joint_output if joint_space else self.output),
         ] + stats_key_values(self.loop.stats())
         level = self.diagnostic_level(self.supervisor.level)
         status = make_diagnostic_status(self.status_name, level, self.state, self.model.name, values)

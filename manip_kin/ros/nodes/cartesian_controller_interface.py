@@ -251,8 +251,9 @@ USAGE = usage_text(
     "With robot '' the model is the URDF on robot_description (robot_description_publisher picks\n"
     "one of several); a later, different one is logged, and the service\n"
     "~/reload_robot_description (std_srvs/Trigger) switches to it when its joints are the same.\n"
-    "With collision_avoidance (a URDF robot) pose goals and twist commands run a QP law that keeps\n"
-    "every checked pair collision_safety_distance apart; a goal it holds off ends 'blocked'.\n"
+    "With collision_avoidance (a URDF robot) pose goals, twist commands, joint references and jogs\n"
+    "run a QP law that keeps every checked pair collision_safety_distance apart; a pose goal or\n"
+    "joint reference it holds off ends 'blocked'.\n"
     f"States on /diagnostics: {', '.join(STATES)}.",
     PARAMETERS,
     extra_help=HELP_LINE,

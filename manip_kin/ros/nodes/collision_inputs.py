@@ -2,7 +2,11 @@
 
 With ``collision_avoidance`` (or a ``posture_reference``) the controller steps
 :class:`~manip_kin.control.qp.law.QpController` for pose goals and twist commands instead of the plain
-:class:`~manip_kin.control.resolved_rate.CartesianController` (whose fast path stays as it is otherwise):
+:class:`~manip_kin.control.resolved_rate.CartesianController` (whose fast path stays as it is otherwise);
+with ``collision_avoidance`` also for joint references and jogs
+(:meth:`~manip_kin.control.qp.law.QpController.joint_step`, instead of
+:func:`~manip_kin.control.joint_tracking.joint_tracking_step`), so no command kind bypasses the
+collision limit:
 
 * the collision model is built once at start from the robot's URDF (the ``robot`` file, or
   the text on ``robot_description``), with ``srdf`` and ``mesh_search_path``;
@@ -11,8 +15,10 @@ With ``collision_avoidance`` (or a ``posture_reference``) the controller steps
   logged throttled; the checker takes the scene in the loop thread, so nothing in a callback
   touches the scene or the checker;
 * every ~50 ms, :func:`~manip_kin.control.qp.blocked.blocked_by` over the last 0.3 s of pose steps
-  says whether a collision constraint holds the arm off its goal: the supervisor then halts
-  in ``blocked`` (the commands come to rest through the command filter) until a new goal;
+  (:func:`~manip_kin.control.qp.blocked.joint_blocked_by` over joint-reference steps) says
+  whether a collision constraint holds the arm off its goal: the supervisor then halts in
+  ``blocked`` (the commands come to rest through the command filter) until a new goal; twist
+  commands and jogs are only held at the safety distance (a velocity command has no goal to block);
 * ``/diagnostics`` gets ``nearest_pair``, ``nearest_distance``, ``qp_status``,
   ``qp_fallbacks``, ``active_constraints``, and ``markers`` a LINE_LIST between the nearest
   pair's witness points (namespace ``collision``), green at the influence distance, red at
@@ -31,14 +37,14 @@ import numpy as np
 from visualization_msgs.msg import Marker, MarkerArray
 
 from manip_kin.collision.distances import CollisionChecker
-from manip_kin.control.qp.blocked import Blocked, blocked_by
-from manip_kin.control.qp.law import QpConfig, QpController, QpOutput
+from manip_kin.control.qp.blocked import Blocked, blocked_by, joint_blocked_by
+from manip_kin.control.qp.law import QpConfig, QpController, QpJointOutput, QpOutput, QpReport
 from manip_kin.control.qp.tasks import PostureTask
 from manip_kin.control.resolved_rate import CartesianController
 from manip_kin.core.scene import Scene
 from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_model
 
-#: Seconds of pose steps :func:`blocked_by` looks at, and how often it looks [ns].
+#: Seconds of pose (or joint) steps :func:`blocked_by` looks at, and how often it looks [ns].
 BLOCKED_WINDOW_S = 0.3
 BLOCKED_EVERY_NS = 50_000_000
 #: Pose steps further apart than this are not one history (a halt or other commands between);
@@ -49,7 +55,8 @@ MARKER_NS = "collision"
 
 class CollisionLaw:
     """The QP law with the plain law's interface (``step(q, goal, twist, horizon)``, ``frame_index``,
-    ``task``, ``config``), so pose goals and twist commands call either the same way."""
+    ``task``, ``config``), so pose goals and twist commands call either the same way; and
+    :meth:`joint_step` for joint references and jogs."""
 
     def __init__(self, qp: QpController, plain: CartesianController, dt: float):
         self.qp = qp
@@ -62,6 +69,10 @@ class CollisionLaw:
     def step(self, q, goal_pose, goal_twist=None, horizon=None) -> QpOutput:
         """One QP step over the control period (the QP's position limit has its own gain, not a horizon)."""
         return self.qp.step(q, goal_pose, goal_twist, self.dt)
+
+    def joint_step(self, q, q_reference, qdot_reference, gain: float) -> QpJointOutput:
+        """One QP step towards a joint reference over the control period."""
+        return self.qp.joint_step(q, q_reference, qdot_reference, gain, self.dt)
 
 
 class CollisionInputs:
@@ -105,6 +116,12 @@ class CollisionInputs:
         """The QP law the node steps now, or None (the plain law)."""
         law = getattr(self.node, "law", None)
         return law if isinstance(law, CollisionLaw) else None
+
+    @property
+    def joint_law(self) -> CollisionLaw | None:
+        """The QP law for joint references and jogs while collision avoidance is on, or None
+        (the plain joint tracking law: a posture alone has nothing to add to a joint reference)."""
+        return self.law if self.enabled else None  # off: one attribute test on the fast path
 
     @property
     def scene(self) -> Scene:
@@ -165,15 +182,30 @@ class CollisionInputs:
             node.position_tolerance if node.controller.task.position_rows else math.inf,
             node.orientation_tolerance if node.controller.task.orientation_rows else math.inf,
         )
+        return self._blocked(
+            output,
+            now_ns,
+            lambda history: blocked_by(history, position_tolerance=tolerances[0], orientation_tolerance=tolerances[1]),
+        )
+
+    def joint_step_done(self, output, now_ns: int) -> Blocked | None:
+        """As :meth:`pose_step_done` for a joint-reference step (the node's ``joint_tolerance``)."""
+        if not isinstance(output, QpJointOutput):
+            return None
+        tolerance = self.node.joint_tolerance
+        return self._blocked(output, now_ns, lambda history: joint_blocked_by(history, tolerance=tolerance))
+
+    def _blocked(self, output: QpReport, now_ns: int, judge) -> Blocked | None:
         history = self._history
-        if now_ns - self._last_record_ns > HISTORY_GAP_NS:
-            history.clear()  # the steps must be consecutive: a halt or another command came between
+        # The steps must be consecutive and of one kind: a halt or another command came between.
+        if now_ns - self._last_record_ns > HISTORY_GAP_NS or (history and type(history[-1]) is not type(output)):
+            history.clear()
         self._last_record_ns = now_ns
         history.append(output)
         if len(history) < history.maxlen or now_ns - self._last_check_ns < BLOCKED_EVERY_NS:
             return None
         self._last_check_ns = now_ns
-        blocked = blocked_by(history, position_tolerance=tolerances[0], orientation_tolerance=tolerances[1])
+        blocked = judge(history)
         if blocked is not None:
             history.clear()
         return blocked
@@ -191,7 +223,7 @@ class CollisionInputs:
             ("obstacles", str(len(self.scene))),
             ("rejected_obstacles", str(self.scene_input.refused if self.scene_input is not None else 0)),
         ]
-        if self.law is None or not isinstance(output, QpOutput):
+        if self.law is None or not isinstance(output, QpReport):
             keys = ("nearest_pair", "nearest_distance", "nearest_points", "qp_status", "qp_fallbacks")
             return [(key, "") for key in (*keys, "active_constraints", "collision_safety_distance")] + scene
         nearest = self._nearest(output)

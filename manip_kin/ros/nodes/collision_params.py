@@ -36,7 +36,7 @@ COLLISION_PARAMETERS = (
         "collision_avoidance",
         "bool",
         False,
-        "keep the arm off itself and off collision_objects (the URDF's <collision> geometry; the QP law)",
+        "keep the arm off itself and off collision_objects under every kind of command (the URDF's <collision> geometry; the QP law)",
     ),
     SAFETY_DISTANCE,
     ParamSpec(

@@ -166,10 +166,14 @@ class ServoInputs:
         output = controller.step(q, goal, (angular, linear), horizon)
         return output, output.qdot
 
-    def jog_step(self, q: np.ndarray, now_ns: int, dt: float, horizon: float, gain: float, config):
-        """The joint tracking output following the jog at ``q``."""
+    def jog_step(self, q: np.ndarray, now_ns: int, dt: float, horizon: float, gain: float, config, law=None):
+        """The joint tracking output following the jog at ``q``: through ``law.joint_step`` (the
+        collision-limited QP, see :class:`~manip_kin.ros.nodes.collision_inputs.CollisionLaw`), or
+        the plain joint law when ``law`` is None."""
         dt = self._elapsed(now_ns, dt)
         reference, rates = self._jog_reference.advance(q, self.jog, dt)
+        if law is not None:
+            return law.joint_step(q, reference, rates, gain)
         return joint_tracking_step(
             self.model,
             q,
