@@ -6,11 +6,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from manip_kin.control.generator_supervisor import GeneratorSupervisor
 from manip_kin.control.state_machines import (
     ControllerState,
     ControllerSupervisor,
     ControllerSupervisorConfig,
-    GeneratorSupervisor,
     GoalKind,
 )
 from manip_kin.pipeline.outcome import motion_timing, seconds_between
