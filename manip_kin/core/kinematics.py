@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.core.model import RobotModel
-from manip_kin.core.pose_jacobian import jacobian_of, pose_of
+from manip_kin.core.pose_jacobian import POSE_VALUES
 from manip_kin.core.rotations import invert_transform, matrix_to_rpy, rpy_rate_matrix, skew
 from manip_kin.errors import InvalidArgumentError
 
@@ -239,7 +239,7 @@ def pose_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> np.ndarr
 def pose_and_jacobian_in_base(model: RobotModel, q: np.ndarray, frame_index: int) -> tuple[np.ndarray, np.ndarray]:
     """Pose (4, 4) and geometric Jacobian ``[angular; linear]`` (6, n) of a frame: the fast path."""
     values = np.array(compiled_kinematics(model, frame_index, True)(q.tolist()))
-    return np.asarray(pose_of(values)).reshape(4, 4), jacobian_of(values, model.dof)
+    return values[:POSE_VALUES].reshape(4, 4), values[POSE_VALUES:].reshape(6, model.dof)
 
 
 # --- one-off convenience wrappers ---------------------------------------------------------------

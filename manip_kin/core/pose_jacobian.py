@@ -31,7 +31,9 @@ def pose_of(values: Sequence[float]) -> Sequence[float]:
 
 
 def jacobian_of(values: Sequence[float], n: int) -> np.ndarray:
-    """The Jacobian as an array, shape (6, n)."""
+    """The Jacobian as an array, shape (6, n) (a view where ``values`` is an array)."""
+    if isinstance(values, np.ndarray):
+        return values[POSE_VALUES:].reshape(6, n)
     return np.fromiter(values[POSE_VALUES:], float, 6 * n).reshape(6, n)
 
 
