@@ -78,7 +78,8 @@ bench-anchors: $(ANCHORS_STAMP)
 
 # Full pipeline (Panda: joint limits, collision geometry, obstacles) + recorder + live view with
 # a client, at 1 kHz for SOAK_MINUTES, lines alternating; not part of `make test`.
-# `make soak SOAK_MINUTES=1` for a short run; SOAK_ARGS="--realtime-priority 20" for SCHED_FIFO.
+# `make soak SOAK_MINUTES=1` for a short run. The loops run at SCHED_FIFO 20 where permitted;
+# SOAK_ARGS="--realtime-priority 0" for normal scheduling.
 SOAK_MINUTES ?= 10
 SOAK_ARGS ?=
 soak: $(STAMP) $(FOXGLOVE_CLIENT)

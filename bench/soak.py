@@ -8,9 +8,10 @@ of bench_collision), the recorder (every manip_kin topic) and ``live_view`` with
 client connected and subscribed to every channel for the whole run
 (test/foxglove_client). Every process is separate, at ``--rate-hz``; every ``--switch-s``
 seconds a line target alternates between two poses either side of the ready pose, clear of
-the obstacles. ``--realtime-priority P`` runs the nodes' loop threads at SCHED_FIFO ``P`` (as
-``make bench`` does where permitted; 0 = normal scheduling). Reported, as JSON (``--out``)
-and a table:
+the obstacles. The nodes' loop threads run at SCHED_FIFO 20 where this process may use it (a
+cell's 1 kHz controller runs real-time, as ros2_control's controller manager does), else at
+normal scheduling; ``--realtime-priority P`` sets the priority (0 = normal scheduling).
+Reported, as JSON (``--out``) and a table:
 
 * per process (the live view client too): RSS at minute 1 and at the end (growth in %), CPU
   share of one core over the run, alive at the end;
@@ -488,6 +489,30 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
+#: The loops' SCHED_FIFO priority where permitted: what ``make bench`` measures with.
+DEFAULT_PRIORITY = 20
+
+
+def fifo_permitted() -> bool:
+    """True when this process may put a thread at SCHED_FIFO (root, CAP_SYS_NICE or an
+    RLIMIT_RTPRIO), tried on a thread of its own that ends at once."""
+    import threading
+
+    permitted = []
+
+    def attempt() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            permitted.append(True)
+        except (OSError, AttributeError):  # AttributeError: no SCHED_FIFO on this platform
+            pass
+
+    thread = threading.Thread(target=attempt)
+    thread.start()
+    thread.join()
+    return bool(permitted)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -499,17 +524,24 @@ def main(argv=None) -> int:
     parser.add_argument(
         "--realtime-priority",
         type=int,
-        default=0,
-        help="SCHED_FIFO priority of the nodes' loop threads (0 = normal scheduling, the default)",
+        default=None,
+        help=f"SCHED_FIFO priority of the nodes' loop threads (0 = normal scheduling; default "
+        f"{DEFAULT_PRIORITY} where this process may use SCHED_FIFO, as a cell's controller runs, else 0)",
     )
     parser.add_argument("--out", default="bench/results/soak.json", help="JSON result file")
     args = parser.parse_args(argv)
     if not (args.minutes > 0 and args.rate_hz > 0 and args.window_s > 0 and args.switch_s > 0):
         parser.error("--minutes, --rate-hz, --window-s and --switch-s must be > 0")
+    if args.realtime_priority is None:
+        args.realtime_priority = DEFAULT_PRIORITY if fifo_permitted() else 0
     if not 0 <= args.realtime_priority <= 99:
         parser.error(f"--realtime-priority {args.realtime_priority}: valid 0 (normal scheduling) to 99")
     out_dir = Path(tempfile.mkdtemp(prefix="manip_kin_soak_"))
-    print(f"soak: {args.minutes:g} min at {args.rate_hz:g} Hz; logs and recording in {out_dir}", file=sys.stderr)
+    scheduling = f"SCHED_FIFO {args.realtime_priority}" if args.realtime_priority else "normal scheduling"
+    print(
+        f"soak: {args.minutes:g} min at {args.rate_hz:g} Hz, {scheduling}; logs and recording in {out_dir}",
+        file=sys.stderr,
+    )
     result = run_soak(args.minutes, args.rate_hz, args.window_s, args.switch_s, out_dir, args.realtime_priority)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")

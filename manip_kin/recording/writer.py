@@ -51,7 +51,10 @@ __all__ = [
 MCAP_PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
-DEFAULT_CHUNK_SIZE = 256 * 1024  # bytes; small enough that each chunk is flushed often
+# Bytes: the MCAP writers' default. The flush every DEFAULT_FLUSH_INTERVAL_S ends a chunk anyway
+# (what SIGKILL can lose); each chunk keeps an index entry in memory until the summary (a
+# 10-minute soak: 3103 chunks at 256 KiB, 1203 at 1 MiB; the recorder grew 4.6 and 4.0 MiB).
+DEFAULT_CHUNK_SIZE = 1024 * 1024
 DEFAULT_FLUSH_INTERVAL_S = 0.5  # SIGKILL loses at most about this much (plus one write)
 
 _COMPRESSIONS = {
