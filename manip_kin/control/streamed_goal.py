@@ -13,7 +13,7 @@ not pass such jumps: on the irb120 line at 0.4 m/s with the limits, the command 
 
 :class:`StreamedGoal` keeps the newest goal pose and twist with their stamps and gives them
 for the state's instant: the pose moved along the twist, the twist along its rate of change.
-A joint reference moves along its velocities (:func:`advance_reference`). Plain numpy: no ROS.
+A joint reference moves along its velocities (:func:`reference_at`). Plain numpy: no ROS.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ["StreamedGoal", "StreamedTwist", "advance_pose", "advance_reference"]
+__all__ = ["StreamedGoal", "StreamedTwist", "advance_pose", "advance_reference", "reference_at"]
 
 
 def advance_pose(pose: np.ndarray, angular, linear, seconds: float) -> np.ndarray:
@@ -59,6 +59,20 @@ def advance_pose(pose: np.ndarray, angular, linear, seconds: float) -> np.ndarra
 def advance_reference(q_reference, qdot_reference, seconds: float) -> np.ndarray:
     """A joint reference moved ``seconds`` along its velocities [rad | m], shape (n,)."""
     return np.asarray(q_reference, dtype=float) + np.asarray(qdot_reference, dtype=float) * seconds
+
+
+def reference_at(q_reference, qdot_reference, stamp_ns: int, instant_ns: int, max_offset: float):
+    """A joint reference stamped ``stamp_ns`` for ``instant_ns`` (same clock): moved along its
+    velocities (:func:`advance_reference`), or as it came when the two are more than
+    ``max_offset`` [s] apart (a stream that stalled, clocks that disagree)."""
+    offset = _offset(instant_ns, stamp_ns, max_offset)
+    return q_reference if offset is None else advance_reference(q_reference, qdot_reference, offset)
+
+
+def _offset(instant_ns: int, stamp_ns: int, max_offset: float) -> float | None:
+    """``instant − stamp`` [s], or None beyond ``max_offset`` either way."""
+    offset = (instant_ns - stamp_ns) * 1e-9
+    return offset if abs(offset) <= max_offset else None
 
 
 def _minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -147,9 +161,9 @@ class StreamedGoal:
     def at(self, instant_ns: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """The goal pose and twist at ``instant_ns`` (same clock as the stamps): the pose moved
         along the twist's mean over the interval, the twist along its rate."""
-        offset = (instant_ns - self.stamp_ns) * 1e-9
-        twist_offset = (instant_ns - self.twist.stamp_ns) * 1e-9
-        if not (abs(offset) <= self._max_offset and abs(twist_offset) <= self._max_offset):
+        offset = _offset(instant_ns, self.stamp_ns, self._max_offset)
+        twist_offset = _offset(instant_ns, self.twist.stamp_ns, self._max_offset)
+        if offset is None or twist_offset is None:
             return self.pose, (self.twist.angular, self.twist.linear)
         pose = advance_pose(self.pose, *self.twist.at(twist_offset - 0.5 * offset), offset)
         return pose, self.twist.at(twist_offset)

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip_kin.control.streamed_goal import StreamedGoal, StreamedTwist, advance_pose, advance_reference
+from manip_kin.control.streamed_goal import StreamedGoal, StreamedTwist, advance_pose, advance_reference, reference_at
 from manip_kin.core.rotations import make_transform, rpy_to_matrix
 from manip_kin.motion.lines import LineTrajectory, MotionLimits
 
@@ -47,6 +47,10 @@ def test_advance_pose_is_the_exponential_of_the_twist(angular, linear, seconds, 
 
 def test_advance_reference_moves_along_the_velocities():
     np.testing.assert_allclose(advance_reference([0.1, -0.2], [1.0, 2.0], 0.003), [0.103, -0.194], atol=1e-15)
+    # For an instant: moved from its stamp, back too; further than the bound, as it came.
+    np.testing.assert_allclose(reference_at([0.1], [2.0], 5 * PERIOD_NS, 8 * PERIOD_NS, 0.01), [0.106], atol=1e-15)
+    np.testing.assert_allclose(reference_at([0.1], [2.0], 5 * PERIOD_NS, 4 * PERIOD_NS, 0.01), [0.098], atol=1e-15)
+    assert reference_at([0.1], [2.0], 5 * PERIOD_NS, 16 * PERIOD_NS, 0.01) == [0.1]
 
 
 def _trapezoid_line() -> LineTrajectory:

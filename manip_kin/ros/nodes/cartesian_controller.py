@@ -43,7 +43,7 @@ from manip_kin.control.state_prediction import (
     predict_positions,
     prediction_horizon,
 )
-from manip_kin.control.streamed_goal import StreamedGoal, advance_reference
+from manip_kin.control.streamed_goal import StreamedGoal, reference_at
 from manip_kin.core.bounds import InputBounds
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.errors import ManipKinError, Problem
@@ -130,9 +130,7 @@ class CartesianControllerNode(LoopingNode):
         self._reference_stamp_ns = 0
         self._twist: tuple[np.ndarray, np.ndarray] | None = None
         # The goal and twist for the predicted state's instant (see law_state).
-        self._streamed = StreamedGoal(
-            MAX_STATE_AGE_PERIODS * self.dt, self.bounds.max_twist_linear, self.bounds.max_twist_angular
-        )
+        self._streamed = self._streamed_goal(self.bounds)
         self.reference: tuple[np.ndarray, np.ndarray] | None = None
         self.output: ControlOutput | None = None
         self.joint_output: JointTrackingOutput | None = None
@@ -264,10 +262,17 @@ class CartesianControllerNode(LoopingNode):
         )
         self._references = JointReferenceReader(model)
         self.bounds = bounds
-        self._streamed = StreamedGoal(
-            MAX_STATE_AGE_PERIODS * self.dt, bounds.max_twist_linear, bounds.max_twist_angular
-        )
+        self._streamed = self._streamed_goal(bounds)
         return None
+
+    def _streamed_goal(self, bounds: InputBounds) -> StreamedGoal:
+        """A goal stream moved at most the prediction's reach, at speeds a goal twist may have."""
+        return StreamedGoal(self.max_goal_offset, bounds.max_twist_linear, bounds.max_twist_angular)
+
+    @property
+    def max_goal_offset(self) -> float:
+        """The furthest [s] a streamed goal is moved to the predicted state's instant."""
+        return MAX_STATE_AGE_PERIODS * self.dt
 
     # --- inputs --------------------------------------------------------------------------------
 
@@ -534,9 +539,9 @@ class CartesianControllerNode(LoopingNode):
         q_reference, qdot_reference = self.reference
         fresh = self.supervisor.goal_fresh(now_ns)
         if fresh and instant_ns is not None:
-            offset = (instant_ns - self._reference_stamp_ns) * 1e-9
-            if abs(offset) <= MAX_STATE_AGE_PERIODS * self.dt:
-                q_reference = advance_reference(q_reference, qdot_reference, offset)
+            q_reference = reference_at(
+                q_reference, qdot_reference, self._reference_stamp_ns, instant_ns, self.max_goal_offset
+            )
         qdot_reference = qdot_reference if fresh else None
         law = self.collision.joint_law
         if law is None:
