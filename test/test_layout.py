@@ -34,12 +34,9 @@ WINGS = (
     "cli",
 )
 
-#: The upward imports there are, each with its reason (the codegen redesign of issue 25 removes them).
-KNOWN_UPWARD = {
-    # the control step inlines these plain-float functions from their own source
-    ("codegen.control_step", "core.rotations"),
-    ("codegen.control_step", "core.damped_least_squares"),
-}
+#: The upward imports there are, each with its reason (none: the codegen redesign of issue 25
+#: moved the plain-float functions the generated code inlines into codegen.inlined).
+KNOWN_UPWARD: set[tuple[str, str]] = set()
 
 
 def module_name(path: Path) -> str:

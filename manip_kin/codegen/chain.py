@@ -7,19 +7,24 @@ transform entries are folded in, zero terms are dropped (the fixed rotations of 
 are signed permutations), and what remains is a few hundred multiply-adds on local
 variables. The result is checked against the numpy reference in the tests.
 
-Values are numeric constants, variable names, or negated names (``"-v3"``), so sign
-flips cost nothing. The generated function takes ``q`` as a sequence of floats and returns a flat tuple:
-the target frame's 4x4 pose, row-major (16 values), followed, when a
-Jacobian is requested, by the geometric Jacobian ``[angular; linear]`` row-major (6n values).
+The emitter (:meth:`ChainSpec.emit`) returns a :class:`manip_kin.codegen.ir.Fragment` whose
+outputs are the target frame's 4x4 pose, row-major (16 values), followed, when a Jacobian is
+requested, by the geometric Jacobian ``[angular; linear]`` row-major (6n values). Each is a
+constant where the structure fixes it (the pose's last row, an axis entry of a joint ahead of
+every moving one, a zero lever arm's linear column), else a local or its negation. The
+compiled ``chain(q)`` returns them as a flat tuple and carries its :class:`ChainSpec`, from which
+the control step, the IK iteration and the damped solve emit the same values into their own code.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
+from manip_kin.codegen.ir import Fragment, Names, Value, render
 from manip_kin.codegen.kernel_cache import kernel
 
 # Entries this close to 0 or ±1 in the fixed transforms are taken as exact: the table
@@ -37,9 +42,9 @@ def _snap(value: float) -> float:
 class _Emitter:
     """Collects generated statements; values are floats (constants) or variable names."""
 
-    def __init__(self):
+    def __init__(self, names: Names):
         self.lines: list[str] = []
-        self.count = 0
+        self.names = names
         self.known: dict[str, str] = {}  # expression -> the variable already holding it
 
     def combine(self, terms: Sequence[tuple], constant: float = 0.0) -> object:
@@ -69,6 +74,10 @@ class _Emitter:
             else:
                 parts.append(f"{a}*{b}" if sign > 0 else f"-{a}*{b}")
         constant = _snap(constant)
+        if sorted(parts) == sorted(p[1:] if p.startswith("-") else f"-{p}" for p in parts):
+            # Every term cancels (``o - o``: a frame at its joint's origin has a zero lever arm):
+            # a structural constant, not a local that happens to be zero.
+            parts = []
         if not parts:
             return constant
         if len(parts) == 1 and constant == 0.0 and "*" not in parts[0]:
@@ -78,9 +87,8 @@ class _Emitter:
             expression += f" - {-constant!r}" if constant < 0.0 else f" + {constant!r}"
         if expression in self.known:  # the same value computed before (e.g. a shared lever arm)
             return self.known[expression]
-        name = f"v{self.count}"
+        name = self.names.fresh("v")
         self.known[expression] = name
-        self.count += 1
         self.lines.append(f"{name} = {expression}")
         return name
 
@@ -100,13 +108,14 @@ def _times_constant(emit: _Emitter, state: list[list[object]], fixed: np.ndarray
 
 
 def _joint_step(
-    emit: _Emitter, state: list[list[object]], fixed: np.ndarray, revolute: bool, i: int
+    emit: _Emitter, state: list[list[object]], fixed: np.ndarray, revolute: bool, joint: str
 ) -> list[list[object]]:
-    """``state · F_i · (Rz(q_i) or Tz(q_i))``: the 3x4 affine state on to joint i's moving frame."""
+    """``state · F_i · (Rz(q_i) or Tz(q_i))``: the 3x4 affine state on to the moving frame of
+    the joint whose value is the local ``joint``."""
     state = _times_constant(emit, state, fixed)
     if revolute:
-        c, s = f"c{i}", f"s{i}"
-        emit.lines.append(f"{c} = cos(q{i}); {s} = sin(q{i})")
+        c, s = emit.names.fresh("c"), emit.names.fresh("s")
+        emit.lines.append(f"{c} = cos({joint}); {s} = sin({joint})")
         for r in range(3):
             col0, col1 = state[r][0], state[r][1]
             # M · Rz(q): column 0 = c·m0 + s·m1, column 1 = c·m1 - s·m0
@@ -114,59 +123,104 @@ def _joint_step(
             state[r][1] = emit.combine([(col1, c), (col0, s, -1.0)])
     else:
         for r in range(3):
-            state[r][3] = emit.combine([(state[r][3], 1.0), (state[r][2], f"q{i}")])
+            state[r][3] = emit.combine([(state[r][3], 1.0), (state[r][2], joint)])
     return state
 
 
-def _function_source(name: str, n: int, emit: _Emitter, outputs: Sequence[object]) -> str:
-    """``def name(q)``: unpack the ``n`` joint values, run ``emit``'s statements, return ``outputs`` as a flat tuple."""
-    arguments = ", ".join(f"q{i}" for i in range(n)) + ("," if n == 1 else "")
-    body = [f"    {arguments} = q"] + [f"    {line}" for line in emit.lines]
-    body.append("    return (" + ", ".join(repr(v) if isinstance(v, float) else v for v in outputs) + ",)")
+def _function_source(name: str, names: Names, joints: Sequence[str], fragment: Fragment) -> str:
+    """``def name(q)``: unpack the joint values into ``joints``, run ``fragment``, return its outputs as a flat tuple."""
+    arguments = ", ".join(joints) + ("," if len(joints) == 1 else "")
+    body = [f"    {arguments} = q"] + [f"    {line}" for line in fragment.lines]
+    body.append("    return (" + ", ".join(render(v) for v in fragment.outputs) + ",)")
     return f"def {name}(q):\n" + "\n".join(body) + "\n"
 
 
-def generate_source(
-    fixed: np.ndarray, revolute: Sequence[bool], tail: np.ndarray, count: int, with_jacobian: bool
-) -> str:
-    """Python source of ``chain(q)`` for the first ``count`` joints, then ``tail``.
+def _function_names(n: int) -> tuple[Names, list[str]]:
+    """The names of a ``def f(q)`` calling cos and sin, and its joint locals ``q0..``."""
+    names = Names(["q", "cos", "sin"])
+    return names, [names.fresh("q") for _ in range(n)]
 
-    Args:
-        fixed: ``F_i`` of :class:`manip_kin.core.model.ChainArrays`, shape (n, 4, 4).
+
+@dataclass(frozen=True)
+class ChainSpec:
+    """What one chain's code depends on (hashable: the kernels' cache key), and its emitter.
+
+    Attributes:
+        shape: the shape of ``fixed``, (n, 4, 4).
+        fixed: ``F_i`` of :class:`manip_kin.core.model.ChainArrays`, as bytes.
         revolute: joint types, True for revolute.
-        tail: constant transform from joint ``count``'s moving frame to the target frame.
+        tail: constant transform from joint ``count``'s moving frame to the target frame, as bytes.
         count: how many joints move the target frame.
-        with_jacobian: also return the geometric Jacobian of the target frame.
+        with_jacobian: the outputs include the geometric Jacobian of the target frame.
     """
-    emit = _Emitter()
-    n = len(revolute)
-    state: list[list[object]] = [[1.0 if r == c else 0.0 for c in range(4)] for r in range(3)]
-    axes, origins = [], []
-    for i in range(count):
-        state = _joint_step(emit, state, fixed[i], revolute[i], i)
-        axes.append([state[r][2] for r in range(3)])
-        origins.append([state[r][3] for r in range(3)])
-    state = _times_constant(emit, state, tail)
-    outputs: list[object] = [state[r][c] for r in range(3) for c in range(4)] + [0.0, 0.0, 0.0, 1.0]
-    if with_jacobian:
-        position = [state[r][3] for r in range(3)]
-        angular = [[0.0] * n for _ in range(3)]
-        linear = [[0.0] * n for _ in range(3)]
-        for i in range(count):
-            z, o = axes[i], origins[i]
-            if revolute[i]:
-                lever = [emit.combine([(position[r], 1.0), (o[r], -1.0)]) for r in range(3)]
-                for r in range(3):
-                    angular[r][i] = z[r]
-                # z × lever
-                linear[0][i] = emit.combine([(z[1], lever[2]), (z[2], lever[1], -1.0)])
-                linear[1][i] = emit.combine([(z[2], lever[0]), (z[0], lever[2], -1.0)])
-                linear[2][i] = emit.combine([(z[0], lever[1]), (z[1], lever[0], -1.0)])
-            else:
-                for r in range(3):
-                    linear[r][i] = z[r]
-        outputs += [v for row in angular + linear for v in row]
-    return _function_source("chain", n, emit, outputs)
+
+    shape: tuple[int, ...]
+    fixed: bytes
+    revolute: tuple[bool, ...]
+    tail: bytes
+    count: int
+    with_jacobian: bool
+
+    @classmethod
+    def of(
+        cls, fixed: np.ndarray, revolute: Sequence[bool], tail: np.ndarray, count: int, with_jacobian: bool
+    ) -> ChainSpec:
+        fixed = np.ascontiguousarray(fixed, dtype=float)
+        tail = np.ascontiguousarray(tail, dtype=float)
+        revolute = tuple(bool(flag) for flag in revolute)
+        return cls(fixed.shape, fixed.tobytes(), revolute, tail.tobytes(), int(count), bool(with_jacobian))
+
+    @property
+    def dof(self) -> int:
+        return len(self.revolute)
+
+    def emit(self, names: Names, joints: Sequence[str]) -> Fragment[tuple[Value, ...]]:
+        """The chain's statements on the joint locals ``joints``, its locals from ``names``.
+
+        Outputs: the pose (16 values, row-major), then with the Jacobian its 6 x n entries
+        ``[angular; linear]`` row-major; constants where the structure fixes them.
+        """
+        fixed = np.frombuffer(self.fixed).reshape(self.shape)
+        tail = np.frombuffer(self.tail).reshape(4, 4)
+        emit = _Emitter(names)
+        n = self.dof
+        state: list[list[object]] = [[1.0 if r == c else 0.0 for c in range(4)] for r in range(3)]
+        axes, origins = [], []
+        for i in range(self.count):
+            state = _joint_step(emit, state, fixed[i], self.revolute[i], joints[i])
+            axes.append([state[r][2] for r in range(3)])
+            origins.append([state[r][3] for r in range(3)])
+        state = _times_constant(emit, state, tail)
+        outputs: list[object] = [state[r][c] for r in range(3) for c in range(4)] + [0.0, 0.0, 0.0, 1.0]
+        if self.with_jacobian:
+            position = [state[r][3] for r in range(3)]
+            angular = [[0.0] * n for _ in range(3)]
+            linear = [[0.0] * n for _ in range(3)]
+            for i in range(self.count):
+                z, o = axes[i], origins[i]
+                if self.revolute[i]:
+                    lever = [emit.combine([(position[r], 1.0), (o[r], -1.0)]) for r in range(3)]
+                    for r in range(3):
+                        angular[r][i] = z[r]
+                    # z × lever
+                    linear[0][i] = emit.combine([(z[1], lever[2]), (z[2], lever[1], -1.0)])
+                    linear[1][i] = emit.combine([(z[2], lever[0]), (z[0], lever[2], -1.0)])
+                    linear[2][i] = emit.combine([(z[0], lever[1]), (z[1], lever[0], -1.0)])
+                else:
+                    for r in range(3):
+                        linear[r][i] = z[r]
+            outputs += [v for row in angular + linear for v in row]
+        return Fragment(emit.lines, tuple(outputs))
+
+    def constants(self) -> dict[int, float]:
+        """Output index -> value of the outputs the structure fixes."""
+        names, joints = _function_names(self.dof)
+        return self.emit(names, joints).constants()
+
+    def source(self) -> str:
+        """Python source of ``chain(q)``: the outputs of :meth:`emit` as a flat tuple."""
+        names, joints = _function_names(self.dof)
+        return _function_source("chain", names, joints, self.emit(names, joints))
 
 
 def compile_chain(
@@ -177,24 +231,18 @@ def compile_chain(
     with_jacobian: bool,
     vectorized: bool = False,
 ) -> Callable[[Sequence[float]], tuple[float, ...]]:
-    """Compile :func:`generate_source` into a function (through :mod:`manip_kin.codegen.kernel_cache`).
+    """Compile :meth:`ChainSpec.source` into a function (through :mod:`manip_kin.codegen.kernel_cache`).
 
-    With ``vectorized`` the same code runs on numpy arrays: pass one array of N values per
-    joint and every returned entry is an array of N values (or a constant).
+    The function carries its :class:`ChainSpec` as ``spec``. With ``vectorized`` the same code
+    runs on numpy arrays: pass one array of N values per joint and every returned entry is an
+    array of N values (or a constant).
     """
-    fixed = np.ascontiguousarray(fixed, dtype=float)
-    tail = np.ascontiguousarray(tail, dtype=float)
-    revolute = tuple(bool(flag) for flag in revolute)
-    # The geometry is the structure here: the source folds every fixed transform in.
-    key = (fixed.shape, fixed.tobytes(), revolute, tail.tobytes(), count, with_jacobian, vectorized)
+    spec = ChainSpec.of(fixed, revolute, tail, count, with_jacobian)
     namespace = {"cos": np.cos, "sin": np.sin} if vectorized else {"cos": math.cos, "sin": math.sin}
-    return kernel(
-        "chain",
-        key,
-        lambda: generate_source(fixed, revolute, tail, count, with_jacobian),
-        "chain",
-        namespace,
-    )
+    # The geometry is the structure here: the source folds every fixed transform in.
+    function = kernel("chain", (spec, vectorized), spec.source, "chain", namespace)
+    function.spec = spec
+    return function
 
 
 def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_offsets: np.ndarray) -> str:
@@ -211,14 +259,15 @@ def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_of
         revolute: joint types, True for revolute.
         frame_offsets: from joint i's moving frame to model frame i, shape (n, 4, 4).
     """
-    emit = _Emitter()
     n = len(revolute)
+    names, joints = _function_names(n)
+    emit = _Emitter(names)
     state: list[list[object]] = [[1.0 if r == c else 0.0 for c in range(4)] for r in range(3)]
     outputs: list[object] = [1.0 if r == c else 0.0 for r in range(4) for c in range(4)]
     twists: list[list[object]] = [[0.0] * n for _ in range(6)]
     bottom = [0.0, 0.0, 0.0, 1.0]
     for i in range(n):
-        state = _joint_step(emit, state, fixed[i], revolute[i], i)
+        state = _joint_step(emit, state, fixed[i], revolute[i], joints[i])
         z, o = [state[r][2] for r in range(3)], [state[r][3] for r in range(3)]
         if revolute[i]:
             for r in range(3):
@@ -233,7 +282,7 @@ def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_of
         frame = _times_constant(emit, state, frame_offsets[i])
         outputs += [frame[r][c] for r in range(3) for c in range(4)] + bottom
     outputs += [v for row in twists for v in row]
-    return _function_source("frames", n, emit, outputs)
+    return _function_source("frames", names, joints, Fragment(emit.lines, tuple(outputs)))
 
 
 def compile_frames(

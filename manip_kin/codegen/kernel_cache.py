@@ -2,7 +2,7 @@
 
 Every generated function (a chain's kinematics, the damped solve, the control step, the IK
 iteration) is built through :func:`kernel`. Its key is the *structural spec*:
-what the source text depends on (the chain's own source, the joint count, the task rows,
+what the source text depends on (the chain's :class:`manip_kin.codegen.chain.ChainSpec`, the task rows,
 which joints have limits), never an ``id()`` and never a tunable value. Gains, damping,
 thresholds and limit values are bound to the code afterwards (:func:`bind`, from
 :func:`manip_kin.codegen.control_step.compile_step` and :func:`manip_kin.codegen.ik_step.compile_ik_iteration`),

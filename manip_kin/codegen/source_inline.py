@@ -4,7 +4,7 @@ The generated control step and IK iteration (:mod:`manip_kin.codegen.control_ste
 variables: a call costs more than the arithmetic of a small function. Rather than keep a
 second, hand-written copy of such a function as a source template, the generator takes the
 function's own source and inlines it: arguments become the caller's expressions, locals get
-a prefix, and the final ``return`` becomes an assignment to the caller's names. So the
+fresh names (:class:`manip_kin.codegen.ir.Names`), and the final ``return`` becomes an assignment to the caller's names. So the
 function stays the one definition, tested as Python, and the generated code follows it.
 
 Only simple functions qualify: positional arguments, one ``return`` as the last statement,
@@ -18,6 +18,8 @@ import ast
 import inspect
 import textwrap
 from collections.abc import Callable, Sequence
+
+from manip_kin.codegen.ir import Names
 
 
 class _Renamer(ast.NodeTransformer):
@@ -42,7 +44,7 @@ def _number(text: str) -> int | float | None:
 
 
 def inline_lines(
-    function: Callable, arguments: Sequence[str], results: Sequence[str], prefix: str, indent: str = "    "
+    function: Callable, arguments: Sequence[str], results: Sequence[str], names: Names, prefix: str
 ) -> list[str]:
     """Statements computing ``results = function(*arguments)`` in place.
 
@@ -51,8 +53,8 @@ def inline_lines(
         arguments: one expression per parameter; a plain name or a number literal is
             substituted, anything else is first assigned to a prefixed local.
         results: names the returned value is unpacked into (one name for a non-tuple return).
-        prefix: prefix of the function's locals in the generated code (must not clash).
-        indent: indentation of every returned line.
+        names: the generated function's names: each local of ``function`` becomes a fresh one.
+        prefix: prefix of those locals (readability only: they are fresh whatever it is).
 
     Raises:
         ValueError: the function does not qualify.
@@ -79,7 +81,7 @@ def inline_lines(
         for node in ast.walk(ast.Module(body=body, type_ignores=[]))
         if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store)
     }
-    mapping = {name: prefix + name for name in assigned}
+    mapping = {name: names.fresh(prefix + name) for name in sorted(assigned)}
     constants: dict[str, int | float] = {}
     lines = []
     for parameter, argument in zip(parameters, arguments):
@@ -89,8 +91,8 @@ def inline_lines(
             # A literal goes in as itself, so that the compiler folds arithmetic on it.
             constants[parameter] = _number(argument)
         else:
-            mapping[parameter] = prefix + parameter
-            lines.append(f"{prefix}{parameter} = {argument}")
+            mapping.setdefault(parameter, names.fresh(prefix + parameter))
+            lines.append(f"{mapping[parameter]} = {argument}")
     renamer = _Renamer(mapping, constants)
     statements = [renamer.visit(statement) for statement in body[:-1]]
     returned = renamer.visit(body[-1]).value
@@ -102,4 +104,4 @@ def inline_lines(
     else:
         target = ", ".join(results) + ("," if len(results) == 1 and isinstance(returned, ast.Tuple) else "")
         lines.append(f"{target} = {ast.unparse(returned)}")
-    return [indent + line for text in lines for line in text.split("\n")]
+    return [line for text in lines for line in text.split("\n")]

@@ -23,10 +23,10 @@ One step, from the joint positions ``q`` and a goal pose (plus an optional goal 
 
 The law runs as one generated function per model and configuration
 (:func:`manip_kin.codegen.control_step.step_source`) on plain floats: the model's unrolled kinematics,
-the pose error with the rotation vector of :mod:`manip_kin.core.rotations`, and the unrolled
+the pose error with the rotation vector of :mod:`manip_kin.codegen.inlined`, and the unrolled
 damped solve; numpy only builds the output arrays. Near a singularity (ruled out cheaply by
 ``det`` and the angular and linear traces of ``J Jᵀ``, see
-:func:`manip_kin.codegen.unrolled_linalg.smallest_eigenvalue_bound`)
+:func:`manip_kin.codegen.inlined.smallest_eigenvalue_bound`)
 it calls the one damped least-squares solve (:class:`manip_kin.core.damped_least_squares.DampedSolver`),
 which computes ``σ_min`` exactly; at a position limit it calls :meth:`CartesianController._redistribute`.
 """
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.codegen.control_step import compile_step
-from manip_kin.core.damped_least_squares import DampedSolver
+from manip_kin.core.damped_least_squares import DampedSolver, symmetric_eigenvalues
 from manip_kin.core.kinematics import compiled_kinematics
 from manip_kin.core.model import RobotModel
 from manip_kin.core.pose_jacobian import jacobian_entry, zero_joint_column
@@ -235,6 +235,7 @@ class CartesianController:
             ControlOutput,
             solve=self._solve_uncertified,
             redistribute=self._redistribute,
+            eigenvalues=symmetric_eigenvalues,
             gain_angular=float(config.gain_angular),
             gain_linear=float(config.gain_linear),
             epsilon_sq=self._epsilon_sq,

@@ -2,7 +2,7 @@
 
 ``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ b`` minimises ``|J q̇ - b|² + λ² |q̇|²``. The damping is zero while
 the smallest singular value ``σ_min`` of ``J`` is at least ``ε`` (``threshold``) and rises
-smoothly below it (Chiaverini's rule, :func:`damping_sq`):
+smoothly below it (Chiaverini's rule, :func:`manip_kin.codegen.inlined.damping_sq`):
 ``λ² = λ_max² (1 - (σ_min / ε)²)``: exact solutions away from singularities, bounded ones
 at them.
 
@@ -10,9 +10,9 @@ at them.
 * :class:`DampedSolver`: the solve with the rule on a generated chain's output
   (:func:`manip_kin.core.kinematics.compiled_kinematics`), unrolled by
   :func:`manip_kin.codegen.unrolled_linalg.damped_solver`; used by the controller, by IK's
-  Newton-Raphson method and, inlined, by the generated control step
+  Newton-Raphson method and, emitted, by the generated control step
   (:mod:`manip_kin.codegen.control_step`). ``σ_min`` is only computed when the cheap certificate
-  (:func:`manip_kin.codegen.unrolled_linalg.smallest_eigenvalue_bound` and ``1/tr((JJᵀ)⁻¹)``)
+  (:func:`manip_kin.codegen.inlined.smallest_eigenvalue_bound` and ``1/tr((JJᵀ)⁻¹)``)
   cannot prove ``σ_min >= ε``.
 """
 
@@ -24,22 +24,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from manip_kin.codegen.unrolled_linalg import bound_group_sizes, damped_solver, smallest_eigenvalue_bound
+from manip_kin.codegen.inlined import bound_group_sizes, damping_sq, smallest_eigenvalue_bound
+from manip_kin.codegen.unrolled_linalg import damped_solver
 from manip_kin.core.pose_jacobian import jacobian_of
 from manip_kin.errors import NonFiniteError
-
-
-def damping_sq(sigma_min_sq: float, threshold_sq: float, damping_max_sq: float) -> float:
-    """Chiaverini's rule: ``λ² = λ_max² (1 - σ_min²/ε²)`` below ``ε``, else 0.
-
-    Args:
-        sigma_min_sq: ``σ_min²``, the smallest eigenvalue of ``J Jᵀ`` (>= 0).
-        threshold_sq: ``ε²`` (> 0).
-        damping_max_sq: ``λ_max²``, the damping at an exact singularity (>= 0).
-
-    One expression, so that the generated control step inlines this very function.
-    """
-    return damping_max_sq * (1.0 - sigma_min_sq / threshold_sq) if sigma_min_sq < threshold_sq else 0.0
 
 
 def damped_least_squares(matrix, rhs, damping: float) -> np.ndarray:
@@ -157,7 +145,7 @@ class DampedSolver:
         damping_max_sq: float,
         try_certificate: bool = True,
     ) -> tuple:
-        """``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` with λ from σ_min (:func:`damping_sq`).
+        """``q̇ = Jᵀ (J Jᵀ + λ² I)⁻¹ rhs`` with λ from σ_min (:func:`manip_kin.codegen.inlined.damping_sq`).
 
         Args:
             values: the chain's output (pose, then the Jacobian).

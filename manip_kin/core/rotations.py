@@ -12,10 +12,11 @@ Conventions:
 from __future__ import annotations
 
 import math
-from math import atan2, sqrt
+from math import sqrt
 
 import numpy as np
 
+from manip_kin.codegen.inlined import rotvec_from_quaternion, shepperd_quaternion
 from manip_kin.errors import NotARotationError, check_finite
 
 
@@ -114,64 +115,8 @@ def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> n
 
 # --- quaternions ---------------------------------------------------------------------------
 
-
-def shepperd_quaternion(
-    m00: float, m01: float, m02: float, m10: float, m11: float, m12: float, m20: float, m21: float, m22: float
-) -> tuple[float, float, float, float]:
-    """Quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation matrix given by its entries, not normalised.
-
-    Shepperd's method on plain floats (control loops call it where a numpy round trip
-    would cost more than the arithmetic): it divides by the largest of the four candidate
-    components, so there is no cancellation anywhere. For a rotation matrix the result has
-    unit length up to rounding. Straight-line code with one ``return``: the generated control
-    step and IK iteration inline this very function (:mod:`manip_kin.codegen.source_inline`).
-    """
-    trace = m00 + m11 + m22
-    if trace >= m00 and trace >= m11 and trace >= m22:
-        s = 2.0 * sqrt(1.0 + trace if trace > -1.0 else 0.0)
-        x = (m21 - m12) / s
-        y = (m02 - m20) / s
-        z = (m10 - m01) / s
-        w = 0.25 * s
-    elif m00 >= m11 and m00 >= m22:
-        s = 2.0 * sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        x = 0.25 * s
-        y = (m01 + m10) / s
-        z = (m02 + m20) / s
-        w = (m21 - m12) / s
-    elif m11 >= m22:
-        s = 2.0 * sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        x = (m01 + m10) / s
-        y = 0.25 * s
-        z = (m12 + m21) / s
-        w = (m02 - m20) / s
-    else:
-        s = 2.0 * sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        x = (m02 + m20) / s
-        y = (m12 + m21) / s
-        z = 0.25 * s
-        w = (m10 - m01) / s
-    if w < 0.0:
-        x = -x
-        y = -y
-        z = -z
-        w = -w
-    return x, y, z, w
-
-
-def rotvec_from_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
-    """Rotation vector (axis × angle, angle in [0, π]) of a quaternion with ``w >= 0``, any length.
-
-    ``2 atan2(|v|, w) v / |v|`` is exact near 0 and near π, where the textbook
-    ``arccos((trace - 1) / 2)`` loses half the digits, and does not depend on the
-    quaternion's length. Inlined by the generated code like :func:`shepperd_quaternion`.
-    """
-    vector_norm = sqrt(x * x + y * y + z * z)
-    if vector_norm < 1e-8 * w:
-        scale = 2.0 / w  # limit of 2·atan2(n, w)/n as n → 0
-    else:
-        scale = 2.0 * atan2(vector_norm, w) / vector_norm
-    return x * scale, y * scale, z * scale
+# Shepperd's method and the rotation vector of a quaternion, on plain floats, are in
+# manip_kin.codegen.inlined: the generated control step inlines them from their source there.
 
 
 def quaternion_from_entries(

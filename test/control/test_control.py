@@ -603,7 +603,7 @@ def test_smallest_eigenvalue_bound_is_a_lower_bound(size_a, size_b, scale_b, spr
     """The scaled AM–GM bound never exceeds λ_min (numpy's eigvalsh, with a margin for its
     rounding), is never below the plain bound det·((m-1)/tr)^(m-1), and is the optimum it claims
     to be: shrinking either group's diagonal by any u <= 1 gives a bound no larger."""
-    from manip_kin.codegen.unrolled_linalg import smallest_eigenvalue_bound
+    from manip_kin.codegen.inlined import smallest_eigenvalue_bound
 
     size = size_a + size_b
     assume(size >= 1)
@@ -635,7 +635,7 @@ def test_smallest_eigenvalue_bound_is_a_lower_bound(size_a, size_b, scale_b, spr
 
 
 def test_smallest_eigenvalue_bound_is_nearly_tight_where_it_should_be():
-    from manip_kin.codegen.unrolled_linalg import smallest_eigenvalue_bound
+    from manip_kin.codegen.inlined import smallest_eigenvalue_bound
 
     # The other eigenvalues equal and much larger than λ_min: the plain bound is nearly λ_min.
     eigenvalues = np.array([1e-4] + [2.0] * 5)

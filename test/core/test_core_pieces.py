@@ -12,9 +12,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kin_reference import rodrigues
 
+from manip_kin.codegen.inlined import rotvec_from_quaternion, shepperd_quaternion
+from manip_kin.codegen.ir import Names, indented
 from manip_kin.codegen.source_inline import inline_lines
 from manip_kin.control.integration import integrate_joint_rates
-from manip_kin.core.rotations import rotvec_from_entries, rotvec_from_quaternion, shepperd_quaternion
+from manip_kin.core.rotations import rotvec_from_entries
 from manip_kin.errors import (
     InputError,
     InvalidArgumentError,
@@ -133,10 +135,11 @@ def test_integrator_without_velocity_limits_does_not_scale():
 
 def _run_inlined(entries: list[float]) -> tuple[float, float, float]:
     names = [f"M{i}{j}" for i in range(3) for j in range(3)]
-    lines = [f"    {name} = {value!r}" for name, value in zip(names, entries)]
-    lines += inline_lines(shepperd_quaternion, names, ["QX", "QY", "QZ", "QW"], "SQ_")
-    lines += inline_lines(rotvec_from_quaternion, ["QX", "QY", "QZ", "QW"], ["E0", "E1", "E2"], "RV_")
-    source = "def f():\n" + "\n".join(lines) + "\n    return E0, E1, E2\n"
+    local = Names(["sqrt", "atan2", *names, "QX", "QY", "QZ", "QW", "E0", "E1", "E2"])
+    lines = [f"{name} = {value!r}" for name, value in zip(names, entries)]
+    lines += inline_lines(shepperd_quaternion, names, ["QX", "QY", "QZ", "QW"], local, "SQ_")
+    lines += inline_lines(rotvec_from_quaternion, ["QX", "QY", "QZ", "QW"], ["E0", "E1", "E2"], local, "RV_")
+    source = "def f():\n" + "\n".join(indented(lines)) + "\n    return E0, E1, E2\n"
     namespace = {"sqrt": math.sqrt, "atan2": math.atan2}
     exec(source, namespace)  # noqa: S102 - test source
     return namespace["f"]()
@@ -171,12 +174,14 @@ def test_inlined_rotation_vector_is_axis_times_angle(axis, angle):
 def test_inliner_puts_literal_arguments_in_as_constants(determinant, trace_a, size_a, trace_b, size_b):
     """A number literal replaces its parameter (no local holds it, so arithmetic on it folds)
     and the inlined code computes what the function returns; names and expressions as before."""
-    from manip_kin.codegen.unrolled_linalg import smallest_eigenvalue_bound
+    from manip_kin.codegen.inlined import smallest_eigenvalue_bound
 
-    lines = inline_lines(smallest_eigenvalue_bound, ["DET", "TA", str(size_a), "(TB)", str(size_b)], ["BOUND"], "EB_")
-    assert not any(line.strip().startswith(("EB_size_a", "EB_size_b")) for line in lines)
-    assert any(line.strip().startswith("EB_trace_b = (TB)") or "EB_trace_b = TB" in line for line in lines)
-    source = "def f(DET, TA, TB):\n" + "\n".join(lines) + "\n    return BOUND\n"
+    names = Names(["DET", "TA", "TB", "BOUND"])
+    arguments = ["DET", "TA", str(size_a), "(TB)", str(size_b)]
+    lines = inline_lines(smallest_eigenvalue_bound, arguments, ["BOUND"], names, "EB_")
+    assert not any(line.startswith(("EB_size_a", "EB_size_b")) for line in lines)
+    assert any(line.startswith("EB_trace_b") and line.endswith(" = (TB)") for line in lines)
+    source = "def f(DET, TA, TB):\n" + "\n".join(indented(lines)) + "\n    return BOUND\n"
     namespace: dict = {}
     exec(source, namespace)  # noqa: S102 - test source
     if size_a + size_b == 0:
@@ -192,16 +197,16 @@ def test_inliner_refuses_what_it_cannot_inline():
         return -x
 
     with pytest.raises(ValueError, match="Return"):
-        inline_lines(early_return, ["a"], ["b"], "P_")
+        inline_lines(early_return, ["a"], ["b"], Names(), "P_")
     with pytest.raises(ValueError, match="takes 1 arguments"):
-        inline_lines(early_return, ["a", "b"], ["c"], "P_")
+        inline_lines(early_return, ["a", "b"], ["c"], Names(), "P_")
 
 
 # --- the damped least-squares pieces --------------------------------------------------------
 
 
 def test_damping_rule_is_chiaverinis():
-    from manip_kin.core.damped_least_squares import damping_sq
+    from manip_kin.codegen.inlined import damping_sq
 
     assert damping_sq(0.0, 4e-4, 1.6e-3) == pytest.approx(1.6e-3)  # λ_max² at a singularity
     assert damping_sq(1e-4, 4e-4, 1.6e-3) == pytest.approx(1.6e-3 * 0.75)
