@@ -127,6 +127,15 @@ def _joint_step(
     return state
 
 
+def _cross(emit: _Emitter, a: Sequence[object], b: Sequence[object]) -> list[object]:
+    """``a × b`` of two 3-vectors of values."""
+    return [
+        emit.combine([(a[1], b[2]), (a[2], b[1], -1.0)]),
+        emit.combine([(a[2], b[0]), (a[0], b[2], -1.0)]),
+        emit.combine([(a[0], b[1]), (a[1], b[0], -1.0)]),
+    ]
+
+
 def _function_source(name: str, names: Names, joints: Sequence[str], fragment: Fragment) -> str:
     """``def name(q)``: unpack the joint values into ``joints``, run ``fragment``, return its outputs as a flat tuple."""
     arguments = ", ".join(joints) + ("," if len(joints) == 1 else "")
@@ -202,10 +211,8 @@ class ChainSpec:
                     lever = [emit.combine([(position[r], 1.0), (o[r], -1.0)]) for r in range(3)]
                     for r in range(3):
                         angular[r][i] = z[r]
-                    # z × lever
-                    linear[0][i] = emit.combine([(z[1], lever[2]), (z[2], lever[1], -1.0)])
-                    linear[1][i] = emit.combine([(z[2], lever[0]), (z[0], lever[2], -1.0)])
-                    linear[2][i] = emit.combine([(z[0], lever[1]), (z[1], lever[0], -1.0)])
+                    for r, value in enumerate(_cross(emit, z, lever)):
+                        linear[r][i] = value
                 else:
                     for r in range(3):
                         linear[r][i] = z[r]
@@ -272,10 +279,8 @@ def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_of
         if revolute[i]:
             for r in range(3):
                 twists[r][i] = z[r]
-            # o × z
-            twists[3][i] = emit.combine([(o[1], z[2]), (o[2], z[1], -1.0)])
-            twists[4][i] = emit.combine([(o[2], z[0]), (o[0], z[2], -1.0)])
-            twists[5][i] = emit.combine([(o[0], z[1]), (o[1], z[0], -1.0)])
+            for r, value in enumerate(_cross(emit, o, z)):
+                twists[3 + r][i] = value
         else:
             for r in range(3):
                 twists[3 + r][i] = z[r]

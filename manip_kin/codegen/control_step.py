@@ -91,8 +91,8 @@ def step_source(
     :class:`manip_kin.control.resolved_rate.CartesianController`).
     """
     n, m = spec.dof, len(rows)
-    fresh = (names := Names(["q", "g", "f", "dt", *_STEP_NAMESPACE, *_VALUES])).fresh
-    names.reserve(*_joint_values(position_limited, speed_limited))
+    names = Names(["q", "g", "f", "dt", *_STEP_NAMESPACE, *_VALUES, *_joint_values(position_limited, speed_limited)])
+    fresh = names.fresh
     head = chain_and_pose_error(names, spec)
     joints, outputs, (gx, gy, gz), error = head.outputs
     lines = ["if not 0.0 < dt < INFINITY:", "    return None", *head.lines]

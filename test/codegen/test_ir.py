@@ -163,3 +163,27 @@ def test_a_spec_is_its_key_and_emits_into_any_names():
     exec(source, scope)  # noqa: S102 - generated in the test
     q = [0.1 * k for k in range(7)]
     assert scope["chain"](q) == chain(q)
+
+
+def test_a_factor_bails_out_with_the_statement_it_is_given():
+    """Two factorisations in one function: their locals are their own, and a pivot that is not
+    positive runs each one's ``on_fail`` (no text is rewritten afterwards)."""
+    from manip_kin.codegen.ir import indented
+    from manip_kin.codegen.unrolled_linalg import cholesky_factor, cholesky_solve
+
+    names = Names(["a", "b", "d", "sqrt"])
+    a = [["a[0]"], ["a[1]", "a[2]"]]
+    first = cholesky_factor(names, a, None, "return 'first'")
+    second = cholesky_factor(names, a, "d", "return 'second'")
+    x = cholesky_solve(names, second.outputs, ["b[0]", "b[1]"])
+    assert not set(first.outputs.pivots + first.outputs.reciprocals) & set(
+        second.outputs.pivots + second.outputs.reciprocals
+    )
+    body = first.lines + second.lines + x.lines + [f"return {', '.join(x.outputs)}"]
+    scope = {"sqrt": np.sqrt}
+    exec("def f(a, b, d):\n" + "\n".join(indented(body)) + "\n", scope)  # noqa: S102 - generated in the test
+    assert scope["f"]([-1.0, 0.0, 1.0], [1.0, 1.0], 2.0) == "first"  # a₀₀ < 0
+    assert scope["f"]([2.0, 0.0, 0.5], [1.0, 1.0], -1.0) == "second"  # positive, not with d = -1
+    # [[2, 1], [1, 2]] x = [3, 3] -> x = [1, 1], with d = 0 and with [[1, 1], [1, 1]] + 1·I
+    np.testing.assert_allclose(scope["f"]([2.0, 1.0, 2.0], [3.0, 3.0], 0.0), [1.0, 1.0])
+    assert scope["f"]([1.0, 1.0, 1.0], [3.0, 3.0], 1.0) == "first"  # singular before the shift
