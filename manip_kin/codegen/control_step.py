@@ -148,16 +148,17 @@ def step_source(
     ]
     near.append(f"{sigma_sq} = {eig}[0] if {eig}[0] > 0.0 else 0.0")
     near += inline_lines(damping_sq, [sigma_sq, "EPSILON_SQ", "DAMPING_MAX_SQ"], [shift], names, "DS_")
-    shifted = cholesky_factor(names, a.outputs, shift, "continue")
-    x = cholesky_solve(names, shifted.outputs, b)
+    # The shifted system in the unshifted one's locals: that one is not read after this branch.
+    unshifted = cholesky_solve(names, factor.outputs, b)
+    shifted = cholesky_factor(names, a.outputs, shift, "continue", into=factor.outputs)
+    x = cholesky_solve(names, shifted.outputs, b, into=unshifted.outputs)
     near += [f"if {shift} > 0.0:", *indented(shifted.lines + x.lines)]
     near += [f"    {q} = {rate}" for q, rate in zip(qd, transpose_times(entries, x.outputs, n))]
     near += [f"    {damping} = sqrt({shift}); {singular} = True", "    break"]
     # No damping configured (λ_max = 0) below ε: the least-squares fallback of the solver.
     near += [f"if {sigma_sq} < EPSILON_SQ:", "    continue"]
     once += indented(near, 2)
-    x = cholesky_solve(names, factor.outputs, b)
-    once += x.lines + [f"{q} = {rate}" for q, rate in zip(qd, transpose_times(entries, x.outputs, n))]
+    once += unshifted.lines + [f"{q} = {rate}" for q, rate in zip(qd, transpose_times(entries, unshifted.outputs, n))]
     once += [f"{damping} = 0.0; {singular} = False", "break"]
     qdot, limited, scale, out = fresh("QDOT"), fresh("LIMITED"), fresh("S"), fresh("OUT")
     lines += [f"for {fresh('_')} in ONCE:", *indented(once), "else:"]

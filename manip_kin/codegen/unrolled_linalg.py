@@ -65,38 +65,49 @@ def gram(names: Names, entries: Entries, size: int, dof: int) -> Fragment[tuple[
     return Fragment(lines, tuple(a))
 
 
-def cholesky_factor(names: Names, a: Sequence[Sequence[str]], shift: str | None, on_fail: str) -> Fragment[Factor]:
+def cholesky_factor(
+    names: Names, a: Sequence[Sequence[str]], shift: str | None, on_fail: str, into: Factor | None = None
+) -> Fragment[Factor]:
     """The Cholesky factor of ``a + shift·I`` (``a`` lower triangular, ``shift`` a local or
     None for none); runs ``on_fail`` (a statement leaving the code: ``return None``,
-    ``continue``) at a pivot that is not positive."""
+    ``continue``) at a pivot that is not positive.
+
+    With ``into`` the factor is written into the locals of that earlier factor of the same
+    size, whose values must not be read afterwards: a long function's locals past the 256th
+    cost an extra instruction (``EXTENDED_ARG``) at every access.
+    """
     m = len(a)
     plus = f" + {shift}" if shift else ""
-    lower = [[""] * m for _ in range(m)]
-    pivots, reciprocals, lines = [], [], []
-    for j in range(m):
-        p, r = names.fresh(f"p{j}_"), names.fresh(f"r{j}_")
+    if into is None:
+        lower = [[names.fresh(f"l{i}_{j}_") if j < i else "" for j in range(m)] for i in range(m)]
+        pivots = [names.fresh(f"p{j}_") for j in range(m)]
+        reciprocals = [names.fresh(f"r{j}_") for j in range(m)]
+        into = Factor(tuple(map(tuple, lower)), tuple(pivots), tuple(reciprocals))
+    lower, lines = into.lower, []
+    for j, (p, r) in enumerate(zip(into.pivots, into.reciprocals)):
         lines.append(f"{p} = {a[j][j]}{plus}" + "".join(f" - {lower[j][k]}*{lower[j][k]}" for k in range(j)))
         # `not p > 0` is also true for NaN: a non-finite input never reaches sqrt.
         lines += [f"if not {p} > 0.0:", f"    {on_fail}", f"{r} = 1.0 / sqrt({p})"]
         for i in range(j + 1, m):
-            lower[i][j] = names.fresh(f"l{i}_{j}_")
             terms = "".join(f" - {lower[i][k]}*{lower[j][k]}" for k in range(j))
             lines.append(f"{lower[i][j]} = ({a[i][j]}{terms}) * {r}")
-        pivots.append(p)
-        reciprocals.append(r)
-    return Fragment(lines, Factor(tuple(map(tuple, lower)), tuple(pivots), tuple(reciprocals)))
+    return Fragment(lines, into)
 
 
-def cholesky_solve(names: Names, factor: Factor, b: Sequence[str]) -> Fragment[tuple[str, ...]]:
-    """``x`` with ``L Lᵀ x = b``: ``L y = b``, then ``Lᵀ x = y`` (the diagonal of L is 1 / r)."""
+def cholesky_solve(
+    names: Names, factor: Factor, b: Sequence[str], into: Sequence[str] | None = None
+) -> Fragment[tuple[str, ...]]:
+    """``x`` with ``L Lᵀ x = b``: ``L y = b``, then ``Lᵀ x = y`` in place (``x_i`` replaces
+    ``y_i``, which nothing reads after; the diagonal of L is 1 / r). With ``into``, ``x`` is
+    written into those locals (no longer needed) instead of fresh ones."""
     lower, r, m = factor.lower, factor.reciprocals, len(b)
-    y, x = [names.fresh(f"y{i}_") for i in range(m)], [names.fresh(f"x{i}_") for i in range(m)]
+    x = list(into) if into is not None else [names.fresh(f"x{i}_") for i in range(m)]
     lines = []
     for i in range(m):
-        lines.append(f"{y[i]} = ({b[i]}" + "".join(f" - {lower[i][k]}*{y[k]}" for k in range(i)) + f") * {r[i]}")
+        lines.append(f"{x[i]} = ({b[i]}" + "".join(f" - {lower[i][k]}*{x[k]}" for k in range(i)) + f") * {r[i]}")
     for i in reversed(range(m)):
         terms = "".join(f" - {lower[k][i]}*{x[k]}" for k in range(i + 1, m))
-        lines.append(f"{x[i]} = ({y[i]}{terms}) * {r[i]}")
+        lines.append(f"{x[i]} = ({x[i]}{terms}) * {r[i]}")
     return Fragment(lines, tuple(x))
 
 
