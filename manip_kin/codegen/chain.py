@@ -39,6 +39,10 @@ def _snap(value: float) -> float:
     return value
 
 
+def _negated(term: str) -> str:
+    return term[1:] if term.startswith("-") else f"-{term}"
+
+
 class _Emitter:
     """Collects generated statements; values are floats (constants) or variable names."""
 
@@ -74,10 +78,11 @@ class _Emitter:
             else:
                 parts.append(f"{a}*{b}" if sign > 0 else f"-{a}*{b}")
         constant = _snap(constant)
-        if sorted(parts) == sorted(p[1:] if p.startswith("-") else f"-{p}" for p in parts):
-            # Every term cancels (``o - o``: a frame at its joint's origin has a zero lever arm):
-            # a structural constant, not a local that happens to be zero.
-            parts = []
+        if len(parts) % 2 == 0 and parts and _negated(parts[0]) in parts:
+            if sorted(parts) == sorted(map(_negated, parts)):
+                # Every term cancels (``o - o``: a frame at its joint's origin has a zero lever
+                # arm): a structural constant, not a local that happens to be zero.
+                parts = []
         if not parts:
             return constant
         if len(parts) == 1 and constant == 0.0 and "*" not in parts[0]:
