@@ -141,7 +141,7 @@ def _cross(emit: _Emitter, a: Sequence[object], b: Sequence[object]) -> list[obj
     ]
 
 
-def _function_source(name: str, names: Names, joints: Sequence[str], fragment: Fragment) -> str:
+def _function_source(name: str, joints: Sequence[str], fragment: Fragment) -> str:
     """``def name(q)``: unpack the joint values into ``joints``, run ``fragment``, return its outputs as a flat tuple."""
     arguments = ", ".join(joints) + ("," if len(joints) == 1 else "")
     body = [f"    {arguments} = q"] + [f"    {line}" for line in fragment.lines]
@@ -179,6 +179,7 @@ class ChainSpec:
     def of(
         cls, fixed: np.ndarray, revolute: Sequence[bool], tail: np.ndarray, count: int, with_jacobian: bool
     ) -> ChainSpec:
+        """The spec of the first ``count`` joints of ``fixed`` (shape (n, 4, 4)), then ``tail`` (4, 4)."""
         fixed = np.ascontiguousarray(fixed, dtype=float)
         tail = np.ascontiguousarray(tail, dtype=float)
         revolute = tuple(bool(flag) for flag in revolute)
@@ -232,7 +233,7 @@ class ChainSpec:
     def source(self) -> str:
         """Python source of ``chain(q)``: the outputs of :meth:`emit` as a flat tuple."""
         names, joints = _function_names(self.dof)
-        return _function_source("chain", names, joints, self.emit(names, joints))
+        return _function_source("chain", joints, self.emit(names, joints))
 
 
 def compile_chain(
@@ -292,7 +293,7 @@ def generate_frames_source(fixed: np.ndarray, revolute: Sequence[bool], frame_of
         frame = _times_constant(emit, state, frame_offsets[i])
         outputs += [frame[r][c] for r in range(3) for c in range(4)] + bottom
     outputs += [v for row in twists for v in row]
-    return _function_source("frames", names, joints, Fragment(emit.lines, tuple(outputs)))
+    return _function_source("frames", joints, Fragment(emit.lines, tuple(outputs)))
 
 
 def compile_frames(
