@@ -1,6 +1,6 @@
 """``trajectory_generator``'s collision check of a planned motion (parameter ``collision_check``).
 
-A line's configurations come from the reach check (:func:`~manip_kin.motion.lines.check_line_reachable`,
+A line's configurations come from the reach check (:func:`~manip_kin.motion.line_reach.check_line_reachable`,
 a sample every centimetre and 0.05 rad), a joint trajectory is sampled every 0.01 rad (or m)
 of its largest joint's travel; :func:`~manip_kin.collision.path.first_collision_along` finds
 the first sample nearer than ``collision_safety_distance``, and the refusal says at what

@@ -3,7 +3,7 @@
 On each valid ``line_target`` the node plans a :class:`~manip_kin.motion.lines.LineTrajectory`
 from the tool pose of the newest ``joint_states`` (its own FK: any driver's joint states
 will do, no robot_state needed), checks the arm can follow it from that configuration
-(:func:`~manip_kin.motion.lines.check_line_reachable`),
+(:func:`~manip_kin.motion.line_reach.check_line_reachable`),
 publishes it on ``planned_path`` and then, every cycle of its
 :class:`~manip_kin.ros.runtime.rate_loop.RateLoop`, publishes the sampled ``goal_pose`` and
 ``goal_twist`` until the end. At the end it publishes the final pose once with a zero
@@ -40,8 +40,9 @@ from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.pose_rows import parse_task
 from manip_kin.errors import InvalidArgumentError, ManipKinError, Problem
 from manip_kin.motion.joint_trajectory import JointTrajectoryPlan, plan_joint_trajectory
+from manip_kin.motion.line_reach import check_line_reachable
 from manip_kin.motion.line_timing import constant_scaling_problem, line_limits_problem
-from manip_kin.motion.lines import LineTrajectory, MotionLimits, check_line_reachable
+from manip_kin.motion.lines import LineTrajectory, MotionLimits
 from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
 from manip_kin.ros.nodes.path_check import PathCheck, joint_path
 from manip_kin.ros.nodes.robot_description import joints_problem
