@@ -53,8 +53,9 @@ from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters, joint
 from manip_kin.ros.nodes.robot_description import joints_problem
 from manip_kin.ros.nodes.robot_model import load_node_model
 from manip_kin.ros.nodes.servo_inputs import ServoInputs
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
-from manip_kin.ros.runtime.params import LiveParameters, declare_parameters, period_ns
+from manip_kin.ros.runtime.params import period_ns
 from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.runtime.rate_loop import stats_key_values
 from manip_kin.ros.runtime.runner import run_node

@@ -11,14 +11,8 @@ from manip_kin.control.state_machines import ControllerState
 from manip_kin.ros.nodes.collision_params import COLLISION_PARAMETERS
 from manip_kin.ros.nodes.joint_limit_params import HELP_LINE
 from manip_kin.ros.nodes.robot_model import model_parameters
-from manip_kin.ros.runtime.params import (
-    REALTIME_PRIORITY,
-    SCHEDULER_SLICE,
-    ParamSpec,
-    diagnostics_rate,
-    loop_rate,
-    usage_text,
-)
+from manip_kin.ros.runtime.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, diagnostics_rate, loop_rate
+from manip_kin.ros.runtime.usage import usage_text
 
 NODE_NAME = "cartesian_controller"
 

@@ -32,10 +32,12 @@ from manip_kin.errors import OperationError
 from manip_kin.recording.msgdef import full_definition_text
 from manip_kin.recording.reader import message_class
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, tf_message_class
-from manip_kin.ros.runtime.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.ros.runtime.declared_params import declare_parameters
+from manip_kin.ros.runtime.params import ParamSpec
 from manip_kin.ros.runtime.polling import RawSubscription, fast_path_problem
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
+from manip_kin.ros.runtime.usage import usage_text
 from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.topics import latest_state_qos
 from manip_kin.viz.live_feed import DEFAULT_VIEW_RATE_HZ, LIVE_TF_TOPICS, VIEW_TOPICS, Delivery, LiveFeed, ViewTopic

@@ -10,7 +10,9 @@ from rclpy.node import Node
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.tf_synthesis import DEFAULT_TF_RATE_HZ, TF_TOPICS
 from manip_kin.recording.writer import COMPRESSION_CHOICES
-from manip_kin.ros.runtime.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.ros.runtime.declared_params import declare_parameters
+from manip_kin.ros.runtime.params import ParamSpec
+from manip_kin.ros.runtime.usage import usage_text
 from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 
 NODE_NAME = "recorder"

@@ -32,22 +32,21 @@ from manip_kin.plant import KinematicPlant
 from manip_kin.ros.nodes.physics_params import PHYSICS_PARAMETERS, make_plant
 from manip_kin.ros.nodes.robot_model import load_node_model, model_parameters
 from manip_kin.ros.nodes.visuals import RobotVisuals
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
 from manip_kin.ros.runtime.params import (
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
-    LiveParameters,
     ParamSpec,
-    declare_parameters,
     diagnostics_rate,
     loop_rate,
     period_ns,
-    usage_text,
 )
 from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.runtime.rate_loop import stats_key_values
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
+from manip_kin.ros.runtime.usage import usage_text
 from manip_kin.ros.wire.cdr import JointStateCdr, PoseStampedCdr, TwistStampedCdr, decode_float64_array
 from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.messages import ns_to_stamp
