@@ -41,7 +41,7 @@ PARAMETERS = (
         "('' = full for 6+ joints)",
     ),
     # Motion limits: from 0.1 mm/s (a 2 m line then takes 6 h) to 10 m/s and 100 m/s^2 (beyond any
-    # arm; the speeds are also capped at twice what this arm can do, see _check_limits); the
+    # arm; the speeds are also capped at twice what this arm can do, see trajectory_generator_params.check_limits); the
     # angular ones from 1e-4 rad/s to 100 rad/s and 1000 rad/s^2. The lower bounds keep durations finite.
     ParamSpec(
         "max_linear_velocity",
