@@ -8,7 +8,7 @@ import pytest
 
 from manip_kin.cli import build_parser
 from manip_kin.ros.nodes import (
-    cartesian_controller,
+    cartesian_controller_interface,
     live_view,
     recorder_config,
     robot_state,
@@ -38,7 +38,7 @@ def _default_text(spec) -> str:
 
 
 @pytest.mark.parametrize(
-    "module", [robot_state, cartesian_controller, trajectory_generator_interface, recorder_config, live_view]
+    "module", [robot_state, cartesian_controller_interface, trajectory_generator_interface, recorder_config, live_view]
 )
 def test_every_node_parameter_is_documented_with_default_unit_liveness_and_range(module):
     rows = {}

@@ -263,9 +263,9 @@ class CollisionInputs:
     def _nearest(self, output):
         """The nearest pair with its witness points at the node's newest ``q`` (computed again at
         the status rate: the step's output keeps only the pair's names), or None."""
-        if self.checker is None or self.node.q is None or output.nearest_pair is None:
+        if self.checker is None or self.node.inputs.q is None or output.nearest_pair is None:
             return None
-        near = self.checker.pair_distances(self.node.q, self.law.qp.config.influence_distance)
+        near = self.checker.pair_distances(self.node.inputs.q, self.law.qp.config.influence_distance)
         return min(near, key=lambda pair: pair.distance) if near else None
 
 
