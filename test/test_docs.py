@@ -11,7 +11,7 @@ from manip_kin.ros.nodes import (
     cartesian_controller_interface,
     live_view,
     recorder_config,
-    robot_state,
+    robot_state_interface,
     trajectory_generator_interface,
 )
 from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
@@ -38,7 +38,8 @@ def _default_text(spec) -> str:
 
 
 @pytest.mark.parametrize(
-    "module", [robot_state, cartesian_controller_interface, trajectory_generator_interface, recorder_config, live_view]
+    "module",
+    [robot_state_interface, cartesian_controller_interface, trajectory_generator_interface, recorder_config, live_view],
 )
 def test_every_node_parameter_is_documented_with_default_unit_liveness_and_range(module):
     rows = {}

@@ -38,7 +38,7 @@ from manip_kin.control.state_prediction import (
 from manip_kin.control.streamed_goal import reference_at
 from manip_kin.errors import ManipKinError
 from manip_kin.ros.nodes.cartesian_controller_inputs import ControllerInputs
-from manip_kin.ros.nodes.cartesian_controller_interface import NODE_NAME, PARAMETERS, USAGE
+from manip_kin.ros.nodes.cartesian_controller_interface import NODE_NAME, USAGE, ControllerParams
 from manip_kin.ros.nodes.cartesian_controller_params import controller_setup, controller_supervisor_config
 from manip_kin.ros.nodes.cartesian_controller_services import ControllerRequests
 from manip_kin.ros.nodes.cartesian_controller_status import StateChangeLog, status_values
@@ -47,7 +47,7 @@ from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters
 from manip_kin.ros.nodes.robot_description import joints_problem
 from manip_kin.ros.nodes.robot_model import load_node_model
 from manip_kin.ros.nodes.servo_inputs import ServoInputs
-from manip_kin.ros.runtime.declared_params import LiveParameters, declare_parameters
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_group, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
@@ -63,14 +63,14 @@ class CartesianControllerNode(LoopingNode):
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
-        params = declare_parameters(self, PARAMETERS)
+        params = declare_parameters(self, ControllerParams)
         self.model = load_node_model(self, params, self._switch_model)
         limit_specs = joint_limit_parameters(self.model)
-        params.update(declare_parameters(self, limit_specs))
+        params = declare_group(self, params, limit_specs)
         self._params = params
-        self.rate_hz = params["rate_hz"]
+        self.rate_hz = params.rate_hz
         self.dt = 1.0 / self.rate_hz
-        self.base_frame = params["base_frame"] or self.model.base_frame
+        self.base_frame = params.base_frame or self.model.base_frame
         self.collision = CollisionInputs(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._warn = ThrottledLog(self.get_logger().warning, 1.0)
         self.inputs = ControllerInputs(self, self.model, self.base_frame, self.max_goal_offset, self._warn)
@@ -79,7 +79,7 @@ class CartesianControllerNode(LoopingNode):
         self.supervisor = ControllerSupervisor(
             controller_supervisor_config(params, self.controller), self.model.joint_names, self._diagnostics_period_ns
         )
-        LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
+        LiveParameters(self, params, self._set_parameters, limit_specs)
         self.requests = ControllerRequests(self)
         self._halting = False
         self.halted = False
@@ -107,8 +107,8 @@ class CartesianControllerNode(LoopingNode):
         self.start_loop(
             self.rate_hz,
             self._cycle,
-            params["realtime_priority"],
-            params["scheduler_slice"],
+            params.realtime_priority,
+            params.scheduler_slice,
             wake_on=(self.inputs.goal_sub,),
         )
 
@@ -124,7 +124,7 @@ class CartesianControllerNode(LoopingNode):
 
     # --- parameters ----------------------------------------------------------------------------
 
-    def _configure(self, params: dict) -> None:
+    def _configure(self, params: ControllerParams) -> None:
         """Build the core objects from ``params``: at start, and on a live change.
 
         Everything is built and checked before anything is replaced, so a refused change
@@ -137,31 +137,30 @@ class CartesianControllerNode(LoopingNode):
         setup = controller_setup(self.model, params, self.collision, self.dt)
         if hasattr(self, "supervisor"):
             self.supervisor.reconfigure(setup.supervisor_config, setup.diagnostics_period_ns)
-        limit_velocity = params["respect_velocity_limits"]
+        limit_velocity = params.respect_velocity_limits
         if hasattr(self, "command_filter"):
             self.command_filter.configure(setup.limits, limit_velocity)
         else:
             self.command_filter = CommandFilter(
                 setup.limits, self.model.lower, self.model.upper, self.dt, limit_velocity
             )
-        self.stop_time = params["stop_time"]
+        self.stop_time = params.stop_time
         self._singularity = setup.singularity
         if hasattr(self, "servo"):
             self.servo.configure(self.model, self._singularity)
         self.limit_horizon = setup.limit_horizon
         self.controller, self.law = setup.controller, setup.law
-        self.position_tolerance = params["position_tolerance"]
-        self.orientation_tolerance = params["orientation_tolerance"]
-        self.inputs.quaternion_tolerance = params["quaternion_tolerance"]
-        self.gain_joint = params["gain_joint"]
-        self.predict_state = params["predict_state"]
-        self.command_latency = params["command_latency"]
-        self.joint_tolerance = params["joint_tolerance"]
+        self.position_tolerance = params.position_tolerance
+        self.orientation_tolerance = params.orientation_tolerance
+        self.inputs.quaternion_tolerance = params.quaternion_tolerance
+        self.gain_joint = params.gain_joint
+        self.predict_state = params.predict_state
+        self.command_latency = params.command_latency
+        self.joint_tolerance = params.joint_tolerance
         self._diagnostics_period_ns = setup.diagnostics_period_ns
 
-    def _set_parameters(self, updates: dict) -> str | None:
+    def _set_parameters(self, params: ControllerParams) -> str | None:
         """Live change of tunable parameters: None once in use, else why not (nothing changes)."""
-        params = {**self._params, **updates}
         try:
             self._configure(params)
         except ManipKinError as error:

@@ -18,6 +18,7 @@ from manip_kin.control.servo import SingularityScaling
 from manip_kin.control.state_machines import ControllerSupervisorConfig
 from manip_kin.core.model import RobotModel
 from manip_kin.ros.nodes.joint_limit_params import joint_limits_from_params
+from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.params import period_ns
 
 
@@ -44,7 +45,7 @@ class ControllerSetup:
     limit_horizon: float
 
 
-def controller_setup(model: RobotModel, params: dict, collision, dt: float) -> ControllerSetup:
+def controller_setup(model: RobotModel, params: ParamStruct, collision, dt: float) -> ControllerSetup:
     """The setup ``params`` give for ``model`` at a period ``dt`` [s]; ``collision`` (the node's
     :class:`~manip_kin.ros.nodes.collision_inputs.CollisionInputs`) makes the QP law when asked for.
 
@@ -52,19 +53,19 @@ def controller_setup(model: RobotModel, params: dict, collision, dt: float) -> C
         ManipKinError: a configuration the controller or its supervisor cannot use.
     """
     config = ControllerConfig(
-        gain_angular=params["gain_angular"],
-        gain_linear=params["gain_linear"],
-        frame=params["frame"] or None,
-        task=params["task"] or None,
-        damping_max=params["damping_max"],
-        singular_threshold=params["singular_threshold"],
-        respect_velocity_limits=params["respect_velocity_limits"],
-        respect_position_limits=params["respect_position_limits"],
+        gain_angular=params.gain_angular,
+        gain_linear=params.gain_linear,
+        frame=params.frame or None,
+        task=params.task or None,
+        damping_max=params.damping_max,
+        singular_threshold=params.singular_threshold,
+        respect_velocity_limits=params.respect_velocity_limits,
+        respect_position_limits=params.respect_position_limits,
     )
     controller = CartesianController(model, config)
     law = collision.configure(model, params, controller, dt)  # the QP, or controller
     supervisor_config = controller_supervisor_config(params, controller)
-    diagnostics_period_ns = period_ns(params["diagnostics_rate_hz"])
+    diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
     limits = joint_limits_from_params(model, params)
     # The law keeps q + q̇·horizon within the position limits: with the horizon of a stop
     # from full speed, a joint nears a limit as slowly as the filter lets it stop, so the
@@ -76,21 +77,21 @@ def controller_setup(model: RobotModel, params: dict, collision, dt: float) -> C
         supervisor_config=supervisor_config,
         diagnostics_period_ns=diagnostics_period_ns,
         limits=limits,
-        singularity=SingularityScaling(params["singularity_slowdown_start"], params["singularity_hard_stop"]),
+        singularity=SingularityScaling(params.singularity_slowdown_start, params.singularity_hard_stop),
         limit_horizon=max(dt, full_stop),
     )
 
 
-def controller_supervisor_config(params: dict, controller: CartesianController) -> ControllerSupervisorConfig:
+def controller_supervisor_config(params: ParamStruct, controller: CartesianController) -> ControllerSupervisorConfig:
     """The supervisor's configuration from ``params``, for ``controller``'s task."""
     return ControllerSupervisorConfig(
-        joint_state_timeout=params["joint_state_timeout"],
-        goal_timeout=params["goal_timeout"],
-        goal_twist_timeout=params["goal_twist_timeout"],
-        position_tolerance=params["position_tolerance"],
-        orientation_tolerance=params["orientation_tolerance"],
-        joint_tolerance=params["joint_tolerance"],
+        joint_state_timeout=params.joint_state_timeout,
+        goal_timeout=params.goal_timeout,
+        goal_twist_timeout=params.goal_twist_timeout,
+        position_tolerance=params.position_tolerance,
+        orientation_tolerance=params.orientation_tolerance,
+        joint_tolerance=params.joint_tolerance,
         task=controller.task,
-        progress_window=params["progress_window"],
-        command_timeout=params["command_timeout"],
+        progress_window=params.progress_window,
+        command_timeout=params.command_timeout,
     )

@@ -45,10 +45,10 @@ from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters
 from manip_kin.ros.nodes.path_check import PathCheck, joint_path
 from manip_kin.ros.nodes.robot_description import joints_problem
 from manip_kin.ros.nodes.robot_model import load_node_model
-from manip_kin.ros.nodes.trajectory_generator_interface import NODE_NAME, PARAMETERS, USAGE
+from manip_kin.ros.nodes.trajectory_generator_interface import NODE_NAME, USAGE, GeneratorParams
 from manip_kin.ros.nodes.trajectory_generator_outputs import MotionStream
 from manip_kin.ros.nodes.trajectory_generator_params import check_limits, generator_settings
-from manip_kin.ros.runtime.declared_params import LiveParameters, declare_parameters
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_group, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
 from manip_kin.ros.runtime.params import period_ns
 from manip_kin.ros.runtime.polling import PolledSubscription
@@ -67,18 +67,18 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
-        params = declare_parameters(self, PARAMETERS)
+        params = declare_parameters(self, GeneratorParams)
         self.model = load_node_model(self, params, self._switch_model)
         limit_specs = joint_limit_parameters(self.model)
-        params.update(declare_parameters(self, limit_specs))
-        self.base_frame = params["base_frame"] or self.model.base_frame
-        self.rate_hz = params["rate_hz"]
-        self.supervisor = GeneratorSupervisor(period_ns(params["diagnostics_rate_hz"]))
+        params = declare_group(self, params, limit_specs)
+        self.base_frame = params.base_frame or self.model.base_frame
+        self.rate_hz = params.rate_hz
+        self.supervisor = GeneratorSupervisor(period_ns(params.diagnostics_rate_hz))
         self._params = params
         self.bounds = InputBounds.of(self.model)
         self.path_check = PathCheck(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._configure(params)
-        LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
+        LiveParameters(self, params, self._set_parameters, limit_specs)
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
@@ -107,8 +107,8 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.start_loop(
             self.rate_hz,
             self._cycle,
-            params["realtime_priority"],
-            params["scheduler_slice"],
+            params.realtime_priority,
+            params.scheduler_slice,
             wake_on=(self._target_sub,),
         )
 
@@ -129,7 +129,7 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     # --- parameters ----------------------------------------------------------------------------
 
-    def _configure(self, params: dict) -> None:
+    def _configure(self, params: GeneratorParams) -> None:
         """Limits and checks from ``params`` (at start and on a live change; the next line uses them).
 
         Raises:
@@ -146,9 +146,8 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.path_check.safety_distance = settings.collision_safety_distance
         self.supervisor.throttle.period_ns = settings.diagnostics_period_ns
 
-    def _set_parameters(self, updates: dict) -> str | None:
+    def _set_parameters(self, params: GeneratorParams) -> str | None:
         """Live change of tunable parameters: None once in use (from the next line on), else why not."""
-        params = {**self._params, **updates}
         try:
             self._configure(params)
         except ManipKinError as error:  # raised before anything changed
@@ -169,7 +168,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         bounds = InputBounds.of(model)
         try:
             check_limits(self.limits, bounds)
-            task = parse_task(self._params["task"] or None, model)
+            task = parse_task(self._params.task or None, model)
             start_frame = model.frame_index(model.default_frame)
         except ManipKinError as error:
             return f"cannot plan for the new model {model.name!r} as configured: {error}"

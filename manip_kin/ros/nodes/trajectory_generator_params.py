@@ -14,6 +14,7 @@ from manip_kin.core.pose_rows import Task, parse_task
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.motion.lines import MotionLimits
 from manip_kin.ros.nodes.joint_limit_params import joint_limits_from_params
+from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.params import period_ns
 
 
@@ -34,31 +35,31 @@ class GeneratorSettings:
     diagnostics_period_ns: int
 
 
-def generator_settings(model: RobotModel, bounds: InputBounds, params: dict) -> GeneratorSettings:
+def generator_settings(model: RobotModel, bounds: InputBounds, params: ParamStruct) -> GeneratorSettings:
     """The settings ``params`` give for ``model``.
 
     Raises:
         ManipKinError: limits the planner cannot use, or a task the model cannot have.
     """
     limits = MotionLimits(
-        max_linear_velocity=params["max_linear_velocity"],
-        max_linear_acceleration=params["max_linear_acceleration"],
-        max_angular_velocity=params["max_angular_velocity"],
-        max_angular_acceleration=params["max_angular_acceleration"],
+        max_linear_velocity=params.max_linear_velocity,
+        max_linear_acceleration=params.max_linear_acceleration,
+        max_angular_velocity=params.max_angular_velocity,
+        max_angular_acceleration=params.max_angular_acceleration,
     )
     check_limits(limits, bounds)
     return GeneratorSettings(
         limits=limits,
         joint_limits=joint_limits_from_params(model, params),
-        task=parse_task(params["task"] or None, model),
-        time_scaling=params["time_scaling"],
-        joint_time_scaling=params["joint_time_scaling"],
-        check_reach=params["check_reach"],
-        joint_state_timeout_ns=int(params["joint_state_timeout"] * 1e9),
-        quaternion_tolerance=params["quaternion_tolerance"],
-        path_points=max(2, params["path_points"]),
-        collision_safety_distance=params["collision_safety_distance"],
-        diagnostics_period_ns=period_ns(params["diagnostics_rate_hz"]),
+        task=parse_task(params.task or None, model),
+        time_scaling=params.time_scaling,
+        joint_time_scaling=params.joint_time_scaling,
+        check_reach=params.check_reach,
+        joint_state_timeout_ns=int(params.joint_state_timeout * 1e9),
+        quaternion_tolerance=params.quaternion_tolerance,
+        path_points=max(2, params.path_points),
+        collision_safety_distance=params.collision_safety_distance,
+        diagnostics_period_ns=period_ns(params.diagnostics_rate_hz),
     )
 
 
