@@ -8,7 +8,8 @@ one control step for the newest command of any kind (a pose goal with its feed-f
 a joint reference, ``twist_command``, ``joint_jog``) and publishes the filter's next command on
 ``joint_velocity_commands``: within the joint limits, always. ``~/stop`` and ``~/pause`` and
 every way the node ends bring the commands to rest (:meth:`CartesianControllerNode.halt`).
-``/diagnostics`` carries the state (see :data:`STATES`), the errors and the loop timing,
+``/diagnostics`` carries the state (see
+:data:`~manip_kin.ros.nodes.cartesian_controller_interface.STATES`), the errors and the loop timing,
 at ``diagnostics_rate_hz`` and at once when the state changes.
 """
 

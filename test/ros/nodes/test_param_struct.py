@@ -16,17 +16,11 @@ from manip_kin.ros.nodes.robot_state_interface import RobotStateParams
 from manip_kin.ros.nodes.trajectory_generator_interface import GeneratorParams
 from manip_kin.ros.runtime.declared_params import LiveParameters, declare_group, declare_parameters
 from manip_kin.ros.runtime.param_struct import DYNAMIC, param_struct
-from manip_kin.ros.runtime.params import ParamSpec
+from manip_kin.ros.runtime.params import KINDS, ParamSpec
 
 STRUCTS = [ControllerParams, GeneratorParams, RobotStateParams, RecorderParams, LiveViewParams]
-PYTHON_TYPES = {
-    "float": float,
-    "int": int,
-    "bool": bool,
-    "str": str,
-    "float_list": tuple[float, ...],
-    "str_list": tuple[str, ...],
-}
+#: The type each kind's field must have (lists as tuples: a struct is immutable).
+PYTHON_TYPES = dict(zip(KINDS, (float, int, bool, str, tuple[float, ...], tuple[str, ...]), strict=True))
 
 TABLE = (
     ParamSpec("rate_hz", "float", 500.0, "loop rate", "Hz", minimum=1.0, maximum=1e4),
