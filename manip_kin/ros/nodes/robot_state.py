@@ -138,11 +138,6 @@ class RobotStateNode(LoopingNode):
         self.command_timeout_ns = int(params.command_timeout * 1e9)
         self._diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
 
-    @property
-    def integrator(self):
-        """The plant (its name from before there were two kinds)."""
-        return self.plant
-
     def _description_text(self, params: RobotStateParams) -> str:
         """The URDF to publish: the file as given, as robot_state_publisher does (with one element naming the
         chain when ``tip_link``/``tool_link`` chose it), or one generated from a robot YAML."""

@@ -194,7 +194,7 @@ def test_bad_parameters_stop_the_node(harness):
     node = harness.start(
         RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100
     )  # integers accepted
-    np.testing.assert_allclose(node.integrator.q, [0, 1, 0, 0, 0, 0])
+    np.testing.assert_allclose(node.plant.q, [0, 1, 0, 0, 0, 0])
 
 
 def _numeric_twist(model, q, qdot, frame, step=1e-6):
