@@ -7,7 +7,13 @@ from pathlib import Path
 import pytest
 
 from manip_kin.cli import build_parser
-from manip_kin.ros.nodes import cartesian_controller, live_view, recorder_config, robot_state, trajectory_generator
+from manip_kin.ros.nodes import (
+    cartesian_controller_interface,
+    live_view,
+    recorder_config,
+    robot_state_interface,
+    trajectory_generator_interface,
+)
 from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,7 +38,8 @@ def _default_text(spec) -> str:
 
 
 @pytest.mark.parametrize(
-    "module", [robot_state, cartesian_controller, trajectory_generator, recorder_config, live_view]
+    "module",
+    [robot_state_interface, cartesian_controller_interface, trajectory_generator_interface, recorder_config, live_view],
 )
 def test_every_node_parameter_is_documented_with_default_unit_liveness_and_range(module):
     rows = {}

@@ -1,4 +1,5 @@
-"""The package's layout (docs/layout.md): no import cycle between modules, wings import one way.
+"""The package's layout (docs/layout.md): no import cycle between modules, wings import one way,
+no module over :data:`MAX_MODULE_LINES` lines.
 
 The import graph is read from the source with ``ast`` (every ``import``, at module level or inside
 a function: a lazy import is still a dependency), nothing is imported.
@@ -37,6 +38,9 @@ WINGS = (
 #: The upward imports there are, each with its reason (none: the codegen redesign of issue 25
 #: moved the plain-float functions the generated code inlines into codegen.inlined).
 KNOWN_UPWARD: set[tuple[str, str]] = set()
+
+#: Longest module [lines]: a longer one has more than one job (split it along a seam, see docs/layout.md).
+MAX_MODULE_LINES = 400
 
 
 def module_name(path: Path) -> str:
@@ -142,6 +146,24 @@ def test_no_lower_wing_imports_rclpy():
             names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
             names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
             assert not {n for n in names if n.split(".")[0] in ("rclpy", "geometry_msgs", "sensor_msgs")}, path
+
+
+def long_modules(package: Path, limit: int = MAX_MODULE_LINES) -> dict[str, int]:
+    """``{path: lines}`` of the modules under ``package`` longer than ``limit`` lines."""
+    counts = {path: len(path.read_text().splitlines()) for path in sorted(package.rglob("*.py"))}
+    return {str(path.relative_to(package.parent)): n for path, n in counts.items() if n > limit}
+
+
+def test_no_module_is_over_the_line_limit():
+    assert long_modules(PACKAGE) == {}, f"modules over {MAX_MODULE_LINES} lines: {long_modules(PACKAGE)}"
+
+
+def test_long_modules_finds_one(tmp_path):
+    package = tmp_path / "pkg"
+    (package / "sub").mkdir(parents=True)
+    (package / "short.py").write_text("x = 1\n" * MAX_MODULE_LINES)
+    (package / "sub" / "long.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
+    assert long_modules(package) == {"pkg/sub/long.py": MAX_MODULE_LINES + 1}
 
 
 @pytest.mark.parametrize("folder", ["support", "core", "control", "ros/nodes"])

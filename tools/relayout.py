@@ -14,7 +14,8 @@ old paths are moved, their old imports rewritten). What it does:
    ``"manip_kin.x:main"``, ``python -m manip_kin.x``, ``:mod:`manip_kin.x```), file paths
    (``manip_kin/x.py``, ``manip_kin/closed_form/``) and test paths (``test/test_x.py``).
 3. Imports of re-exported names (:data:`REEXPORTS`: the ``conversions`` shim, ``rate_loop``'s
-   lazy ``LoopingNode``) are pointed at the module that defines them, ``conv.x`` becomes ``x``;
+   lazy ``LoopingNode``, the names that moved when the modules over 400 lines were split) are
+   pointed at the module that defines them, ``conv.x`` becomes ``x``;
    the shim files (:data:`SHIMS`) are deleted. Run ``make format`` afterwards (import order).
 
 The hand edits that need thought (splits, cycles, renames of classes) are separate commits.
@@ -273,6 +274,35 @@ REEXPORTS: dict[str, dict[str, str]] = {
         "PolledSubscription": "ros.runtime.polling",
         "ThrottledLog": "ros.runtime.throttled_log",
     },
+    # the splits of the modules over 400 lines (issue 25): names that moved out of a module
+    "ros.runtime.params": {
+        **dict.fromkeys(("LiveParameters", "declare_parameters", "MAX_REASON"), "ros.runtime.declared_params"),
+        "usage_text": "ros.runtime.usage",
+    },
+    "recording.msgdef": dict.fromkeys(
+        "rihs01_from_schema rihs01_hash rosidl_type_hash type_description type_hash".split(), "recording.type_hash"
+    ),
+    "recording.writer": {
+        **dict.fromkeys(("OutputLayout", "resolve_output"), "recording.output_layout"),
+        **dict.fromkeys(("RecordingSummary", "format_bytes"), "recording.summary"),
+    },
+    "viz.plotting": dict.fromkeys(
+        "PLOTTED_TOPIC_TYPES PoseSeries RunData TwistSeries load_run plotted_topics tracking_errors".split(),
+        "viz.run_data",
+    ),
+    "motion.lines": dict.fromkeys(("ReachReport", "check_line_reachable"), "motion.line_reach"),
+    "pipeline.supervisor": dict.fromkeys(
+        "IRB120_LINE_GENERATOR PIPELINE_NODES NodeProcess find_executable pipeline_processes".split(),
+        "pipeline.node_process",
+    ),
+    "pipeline.client": dict.fromkeys(("GOAL_RESEND_AFTER_S", "GOAL_RESENDS"), "pipeline.waiting"),
+    **{
+        f"ros.nodes.{node}": dict.fromkeys(
+            ("NODE_NAME", "PARAMETERS", "STATES", "USAGE"), f"ros.nodes.{node}_interface"
+        )
+        for node in ("cartesian_controller", "trajectory_generator")
+    },
+    "ros.nodes.robot_state": dict.fromkeys(("NODE_NAME", "PARAMETERS", "USAGE"), "ros.nodes.robot_state_interface"),
 }
 SHIMS = ("ros.wire.conversions",)
 

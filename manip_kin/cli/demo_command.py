@@ -231,7 +231,8 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
             print(f"recorder exited with {summary_code}", file=sys.stderr)
     _heading(f"4/4 the recording: {out}")
     from manip_kin.recording import read_info
-    from manip_kin.viz.plotting import load_run, plot_run
+    from manip_kin.viz.plotting import plot_run
+    from manip_kin.viz.run_data import load_run
 
     print(read_info(out).to_text())
     run = load_run(out, namespace=namespace)

@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 from manip_kin.viz.collision_plot import FIGURE as COLLISION_FIGURE
-from manip_kin.viz.plotting import FIGURES, load_run, plot_run
+from manip_kin.viz.plotting import FIGURES, plot_run
+from manip_kin.viz.run_data import load_run
 
 
 def register(subparsers) -> None:

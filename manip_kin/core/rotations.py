@@ -92,7 +92,7 @@ def is_rotation(matrix, tolerance: float = 1e-6) -> bool:
     m = np.asarray(matrix, dtype=float)
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return False
-    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: inf, then False, not a warning
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # huge entries: inf, then False, not a warning
         return bool(np.allclose(m @ m.T, np.eye(3), atol=tolerance) and abs(np.linalg.det(m) - 1.0) < tolerance)
 
 
@@ -103,7 +103,7 @@ def check_rotation(matrix, what: str = "rotation", tolerance: float = 1e-6) -> n
         raise NotARotationError(f"{what} has shape {m.shape}; a rotation is a 3x3 matrix")
     check_finite(m, what)
     if not is_rotation(m, tolerance):
-        with np.errstate(over="ignore", invalid="ignore"):
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             det = float(np.linalg.det(m))
             error = float(np.abs(m @ m.T - np.eye(3)).max())
         raise NotARotationError(

@@ -1,6 +1,6 @@
 """Whether a timed line keeps the joints within their velocity and acceleration limits.
 
-The reach check (:func:`~manip_kin.motion.lines.check_line_reachable`) gives the joint path
+The reach check (:func:`~manip_kin.motion.line_reach.check_line_reachable`) gives the joint path
 ``q(s)`` over the line's progress ``s``; the time scaling gives ``s(t)``. Then
 ``q̇ = q'(s)·ṡ`` and ``q̈ = q''(s)·ṡ² + q'(s)·s̈``, with ``q'`` and ``q''`` from finite
 differences of the path, evaluated on 400 instants of the line. That is an estimate (the
@@ -20,7 +20,8 @@ import numpy as np
 
 from manip_kin.control.joint_limits import JointLimits
 from manip_kin.core.model import RobotModel
-from manip_kin.motion.lines import LineTrajectory, ReachReport
+from manip_kin.motion.line_reach import ReachReport
+from manip_kin.motion.lines import LineTrajectory
 
 #: Instants of the line at which the joint rates and accelerations are evaluated.
 TIMING_SAMPLES = 400

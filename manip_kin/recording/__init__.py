@@ -14,7 +14,8 @@ from manip_kin.recording.errors import CorruptRecordingError, MessageDefinitionE
 from manip_kin.recording.info import RecordingInfo, read_info
 from manip_kin.recording.reader import RecordedMessage, iter_raw_messages, read_messages
 from manip_kin.recording.salvage import SalvageReport, salvage
-from manip_kin.recording.writer import RecordingSummary, RecordingWriter
+from manip_kin.recording.summary import RecordingSummary
+from manip_kin.recording.writer import RecordingWriter
 
 __all__ = [
     "CorruptRecordingError",

@@ -122,7 +122,7 @@ class RecordingInfo:
         def line(label: str, value: str) -> str:
             return f"{label + ':':<{pad}}{value}"
 
-        from manip_kin.recording.writer import format_bytes
+        from manip_kin.recording.summary import format_bytes
 
         lines = [
             line("Files", ("\n" + " " * pad).join(str(f) for f in self.files)),

@@ -159,7 +159,7 @@ def add_tf(source: str | Path, output: str | Path, rate_hz: float = DEFAULT_TF_R
     A recording that already has ``/tf`` is copied as it is (its TF is the live one).
 
     Returns:
-        ``(summary, status line)``: the :class:`~manip_kin.recording.writer.RecordingSummary`
+        ``(summary, status line)``: the :class:`~manip_kin.recording.summary.RecordingSummary`
         of ``output`` and :meth:`TfSynthesizer.status`.
 
     Raises:

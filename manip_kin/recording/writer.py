@@ -14,7 +14,6 @@ file complete (and the ``rosbag2`` metadata record and ``metadata.yaml``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,34 +22,15 @@ from mcap.writer import Writer as McapWriter
 
 from manip_kin import __version__
 from manip_kin.recording import metadata as bag_metadata
-from manip_kin.recording.cdr_measure import CdrLayout, header_stamp_ns
+from manip_kin.recording.cdr_measure import header_stamp_ns
+from manip_kin.recording.channels import Channels
 from manip_kin.recording.errors import RecordingError
-from manip_kin.recording.msgdef import (
-    definitions_from_schema,
-    full_definition_text,
-    has_header_first,
-    normalize_type_name,
-    type_hash,
-)
-from manip_kin.recording.output_layout import OutputLayout, resolve_output
-from manip_kin.recording.qos import OfferedProfiles, default_offer
-from manip_kin.recording.summary import RecordingSummary, format_bytes
+from manip_kin.recording.output_layout import resolve_output
+from manip_kin.recording.qos import OfferedProfiles
+from manip_kin.recording.summary import RecordingSummary
 from manip_kin.recording.write_failure import DiskGuard, RecordingWriteError
 
-# Names other modules import from here.
-__all__ = [
-    "COMPRESSION_CHOICES",
-    "OutputLayout",
-    "RecordingSummary",
-    "RecordingWriter",
-    "format_bytes",
-    "resolve_output",
-    "type_name_of",
-]
-
 MCAP_PROFILE = "ros2"
-SCHEMA_ENCODING = "ros2msg"
-MESSAGE_ENCODING = "cdr"
 # Bytes: the MCAP writers' default. The flush every DEFAULT_FLUSH_INTERVAL_S ends a chunk anyway
 # (what SIGKILL can lose); each chunk keeps an index entry in memory until the summary (a
 # 10-minute soak: 3103 chunks at 256 KiB, 1203 at 1 MiB; the recorder grew 4.6 and 4.0 MiB).
@@ -69,18 +49,6 @@ def type_name_of(message_class: type) -> str:
     """``pkg/msg/Type`` of a generated rclpy message class."""
     package = message_class.__module__.split(".")[0]
     return f"{package}/msg/{message_class.__name__}"
-
-
-@dataclass
-class _Topic:
-    name: str
-    type: str
-    channel_id: int
-    offered: OfferedProfiles
-    type_hash: str
-    header_first: bool
-    message_count: int = 0
-    sequence: int = 0
 
 
 class RecordingWriter:
@@ -129,10 +97,8 @@ class RecordingWriter:
         with self._disk.guard():
             self._mcap.start(profile=MCAP_PROFILE, library=f"manip_kin {__version__}; mcap-python")
             self._file.flush()
-        self._schemas: dict[str, int] = {}
-        self._definitions: dict[str, Any] = {}
-        self._layouts: dict[str, CdrLayout] = {}
-        self._topics: dict[str, _Topic] = {}
+        self._channels = Channels(self._mcap)
+        self._topics = self._channels.topics
         self._message_bytes = 0
         self._start_ns = 0
         self._end_ns = 0
@@ -176,36 +142,7 @@ class RecordingWriter:
             RecordingError: when the topic was registered with another type.
             MessageDefinitionError: when the type's definition cannot be found.
         """
-        type_name = normalize_type_name(type_name)
-        existing = self._topics.get(topic)
-        if existing is not None:
-            if existing.type != type_name:
-                raise RecordingError(f"topic {topic!r} is recorded as {existing.type}; cannot also record {type_name}")
-            return
-        if type_name not in self._schemas:
-            encoding, text = schema or (SCHEMA_ENCODING, full_definition_text(type_name))
-            self._schemas[type_name] = self._mcap.register_schema(
-                name=type_name, encoding=encoding, data=text.encode("utf-8")
-            )
-            if encoding == SCHEMA_ENCODING:
-                self._definitions[type_name] = definitions_from_schema(type_name, text)
-        offered = offered_qos_profiles if offered_qos_profiles is not None else default_offer()
-        hash_text = type_description_hash if type_description_hash is not None else type_hash(type_name)
-        channel_id = self._mcap.register_channel(
-            topic=topic,
-            message_encoding=MESSAGE_ENCODING,
-            schema_id=self._schemas[type_name],
-            metadata={"offered_qos_profiles": offered.to_yaml(), "topic_type_hash": hash_text},
-        )
-        definitions = self._definitions.get(type_name)
-        self._topics[topic] = _Topic(
-            name=topic,
-            type=type_name,
-            channel_id=channel_id,
-            offered=offered,
-            type_hash=hash_text,
-            header_first=bool(definitions) and has_header_first(type_name, definitions),
-        )
+        self._channels.add(topic, type_name, offered_qos_profiles, type_description_hash, schema)
 
     # -- messages ---------------------------------------------------------------------------
 
@@ -289,13 +226,7 @@ class RecordingWriter:
 
         if topic not in self._topics:
             self.add_topic(topic, type_name_of(type(message)))
-        type_name = self._topics[topic].type
-        data = serialize_message(message)
-        layout = self._layouts.get(type_name)
-        if layout is None and type_name in self._definitions:
-            layout = self._layouts[type_name] = CdrLayout(self._definitions[type_name])
-        if layout is not None:
-            data = data[: layout.message_length(type_name, data)]
+        data = self._channels.trimmed(topic, serialize_message(message))
         self.write_raw(
             topic,
             data,
@@ -328,16 +259,7 @@ class RecordingWriter:
 
     def topic_summaries(self) -> list[bag_metadata.TopicSummary]:
         """Per-topic metadata, in registration order."""
-        return [
-            bag_metadata.TopicSummary(
-                name=t.name,
-                type=t.type,
-                message_count=t.message_count,
-                offered_qos_profiles=t.offered,
-                type_hash=t.type_hash,
-            )
-            for t in self._topics.values()
-        ]
+        return self._channels.summaries()
 
     def close(self) -> RecordingSummary:
         """Finish the file (rosbag2 metadata record, summary, footer) and ``metadata.yaml``.

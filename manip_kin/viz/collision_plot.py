@@ -132,7 +132,7 @@ def _draw_obstacle(axis, obstacle, colour) -> np.ndarray:
 
 def arm_from_joint_states(run) -> ArmFrames | None:
     """The arm's frame origins from ``robot_description`` and the joint states of a
-    :class:`~manip_kin.viz.plotting.RunData` (for a recording without ``/tf``), or None."""
+    :class:`~manip_kin.viz.run_data.RunData` (for a recording without ``/tf``), or None."""
     from manip_kin.core.kinematics import frame_poses
     from manip_kin.core.urdf import load_urdf_string
     from manip_kin.errors import ManipKinError

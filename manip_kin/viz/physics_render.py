@@ -79,7 +79,7 @@ def recorded_scene(path: str | Path, namespace: str = ""):
 
 
 def render_run(run, out_dir: str | Path, frames: int = 60, mesh_search_path: str = "", scene=None) -> list[Path]:
-    """Draw ``frames`` joint states of ``run`` (a :class:`~manip_kin.viz.plotting.RunData`), evenly spread,
+    """Draw ``frames`` joint states of ``run`` (a :class:`~manip_kin.viz.run_data.RunData`), evenly spread,
     with the obstacles of ``scene`` (see :func:`recorded_scene`; None: none).
 
     Writes ``render_start.png``, ``render_middle.png``, ``render_end.png`` and ``render.gif``

@@ -29,8 +29,8 @@ from manip_kin.core.tf_tree import (
 )
 from manip_kin.core.urdf import load_urdf, model_to_urdf
 from manip_kin.errors import InvalidArgumentError, ModelFileError
-from manip_kin.recording.msgdef import type_hash
 from manip_kin.recording.tf_message import TF_MESSAGE_TYPE, encode_tf_message
+from manip_kin.recording.type_hash import type_hash
 
 ROBOTS = bundled_robot_names()
 

@@ -16,14 +16,8 @@ from manip_kin.core.rotations import (
     rpy_to_matrix,
 )
 from manip_kin.errors import InvalidArgumentError, NonFiniteError, NotARotationError
-from manip_kin.motion.lines import (
-    TIME_SCALINGS,
-    LineTrajectory,
-    MotionLimits,
-    check_line_reachable,
-    distance_to_segment,
-    make_time_scaling,
-)
+from manip_kin.motion.line_reach import check_line_reachable
+from manip_kin.motion.lines import TIME_SCALINGS, LineTrajectory, MotionLimits, distance_to_segment, make_time_scaling
 
 START = make_transform(rpy_to_matrix(0.2, -0.4, 1.0), [0.4, 0.1, 0.6])
 GOAL = make_transform(rpy_to_matrix(-0.5, 0.3, 2.2), [-0.4, 0.3, 0.5])

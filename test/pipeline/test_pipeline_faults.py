@@ -97,7 +97,7 @@ def test_a_goal_lost_on_the_way_is_sent_again(tmp_path, topic):
     publish is dropped on purpose."""
     from geometry_msgs.msg import PoseStamped
 
-    from manip_kin.pipeline.client import GOAL_RESEND_AFTER_S, GOAL_RESENDS
+    from manip_kin.pipeline.waiting import GOAL_RESEND_AFTER_S, GOAL_RESENDS
 
     processes = pipeline_processes("genova7", rate_hz=200.0, controller=QUICK_GAINS)
     with Pipeline(processes, env=fresh_domain_env(), log_dir=tmp_path) as pipeline:

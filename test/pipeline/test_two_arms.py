@@ -18,7 +18,7 @@ from manip_kin.core.robots import load_robot
 from manip_kin.core.rotations import matrix_to_quat
 from manip_kin.pipeline import NodeProcess, Pipeline, PipelineClient, pipeline_processes
 from manip_kin.recording import read_info, read_messages
-from manip_kin.viz.plotting import load_run
+from manip_kin.viz.run_data import load_run
 
 MANIP_KIN = str(Path(sys.executable).parent / "manip_kin")
 

@@ -119,7 +119,7 @@ def _commands_on_a_ros2_control_topic(path: Path, topic: str) -> None:
 
 
 def test_plot_finds_the_commands_by_type_on_a_remapped_topic(tmp_path):
-    from manip_kin.viz.plotting import load_run
+    from manip_kin.viz.run_data import load_run
 
     path = tmp_path / "remapped.mcap"
     _commands_on_a_ros2_control_topic(path, "/forward_velocity_controller/commands")
@@ -130,7 +130,7 @@ def test_plot_finds_the_commands_by_type_on_a_remapped_topic(tmp_path):
 
 
 def test_a_type_is_looked_up_only_when_one_topic_has_it_and_poses_only_by_name():
-    from manip_kin.viz.plotting import plotted_topics
+    from manip_kin.viz.run_data import plotted_topics
 
     two = {"/a/commands": "std_msgs/msg/Float64MultiArray", "/b/commands": "std_msgs/msg/Float64MultiArray"}
     assert plotted_topics(two) == {}

@@ -40,14 +40,9 @@ from manip_kin.recording import (
     salvage,
 )
 from manip_kin.recording.cdr_measure import CdrLayout
-from manip_kin.recording.msgdef import (
-    full_definition_text,
-    local_definitions,
-    read_msg_text,
-    rihs01_from_schema,
-    rosidl_type_hash,
-)
+from manip_kin.recording.msgdef import full_definition_text, local_definitions, read_msg_text
 from manip_kin.recording.qos import default_offer, parse_profiles
+from manip_kin.recording.type_hash import rihs01_from_schema, rosidl_type_hash
 
 REPO = Path(__file__).resolve().parents[2]
 # The console scripts of the interpreter running the tests (the venv make uses, or any other).

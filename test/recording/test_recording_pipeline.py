@@ -21,7 +21,8 @@ from sensor_msgs.msg import JointState
 from manip_kin.core.rotations import make_transform, rpy_to_matrix
 from manip_kin.pipeline import NodeProcess, pipeline_processes
 from manip_kin.recording import read_info, read_messages
-from manip_kin.viz.plotting import FIGURES, TF_FIGURE, load_run, tracking_errors
+from manip_kin.viz.plotting import FIGURES, TF_FIGURE
+from manip_kin.viz.run_data import load_run, tracking_errors
 
 MANIP_KIN = Path(sysconfig.get_path("scripts")) / "manip_kin"
 GOAL = make_transform(rpy_to_matrix(0.0, 1.2, 0.3), [0.2, -0.8, 0.35])

@@ -212,8 +212,9 @@ QUEUE_DEPTH = 10
 def recorder_in_process(monkeypatch, tmp_path):
     """``make(manual_intake)``: a RecorderNode recording /joint_states to ``tmp_path/lossy.mcap``."""
     from manip_kin.ros.nodes import recorder as recorder_module
+    from manip_kin.ros.nodes import recorder_topics
 
-    monkeypatch.setattr(recorder_module, "SUBSCRIPTION_DEPTH", QUEUE_DEPTH)
+    monkeypatch.setattr(recorder_topics, "SUBSCRIPTION_DEPTH", QUEUE_DEPTH)
     output = tmp_path / "lossy.mcap"
     made = []
 

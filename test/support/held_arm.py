@@ -45,7 +45,7 @@ def start_held_arm(harness, robot: str, q0, **params):
     harness.executor.add_node(node)  # serve its ~/stop and ~/pause
     node.test_namespace = namespace
     harness.wait_matched(f"{namespace}/goal_pose", PoseStamped)
-    assert harness.spin_until(lambda: node.q is not None, 5)
+    assert harness.spin_until(lambda: node.inputs.q is not None, 5)
     # The arm hears the controller before anything moves: a subscription matched late (a loaded
     # machine) would miss the start of a ramp, and the stream would seem to jump from zero.
     assert harness.spin_until(lambda: hardware.commands_received > 0, 10), "the arm hears no command"

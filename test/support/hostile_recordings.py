@@ -196,7 +196,7 @@ def run_hypothesis(root: Path, bases: dict[str, Path], examples: int) -> str | N
     import manip_kin.cli.plot_commands as plot_commands
 
     # Figures are drawn by the named cases; here plot reads the run and computes the errors only.
-    from manip_kin.viz.plotting import tracking_errors
+    from manip_kin.viz.run_data import tracking_errors
 
     plot_commands.plot_run = lambda run, out_dir, title="": [tracking_errors(run)] and []
     bag = bases.pop("bag")  # a bag directory the writer made: its metadata.yaml is mutated

@@ -5,7 +5,7 @@ from PIL import Image
 from test_recording_tf import write_run
 
 from manip_kin.viz.physics_render import HEIGHT, WIDTH, render_run
-from manip_kin.viz.plotting import load_run
+from manip_kin.viz.run_data import load_run
 
 
 def test_render_draws_the_recorded_arm_moving_into_pngs_and_a_gif(tmp_path):

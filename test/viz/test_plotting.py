@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.core.rotations import matrix_to_quat, rpy_to_matrix
-from manip_kin.viz.plotting import FIGURES, PoseSeries, RunData, plot_run
+from manip_kin.viz.plotting import FIGURES, plot_run
+from manip_kin.viz.run_data import PoseSeries, RunData
 
 
 def _run_without_commands() -> RunData:

@@ -11,14 +11,9 @@ from manip_kin.control.state_machines import ControllerState
 from manip_kin.ros.nodes.collision_params import COLLISION_PARAMETERS
 from manip_kin.ros.nodes.joint_limit_params import HELP_LINE
 from manip_kin.ros.nodes.robot_model import model_parameters
-from manip_kin.ros.runtime.params import (
-    REALTIME_PRIORITY,
-    SCHEDULER_SLICE,
-    ParamSpec,
-    diagnostics_rate,
-    loop_rate,
-    usage_text,
-)
+from manip_kin.ros.runtime.param_struct import param_struct
+from manip_kin.ros.runtime.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, diagnostics_rate, loop_rate
+from manip_kin.ros.runtime.usage import usage_text
 
 NODE_NAME = "cartesian_controller"
 
@@ -233,6 +228,11 @@ PARAMETERS = (
     *COLLISION_PARAMETERS,
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
+)
+
+#: The parameters as a typed struct (what the node reads; the joint_limits.* group is in its ``dynamic``).
+ControllerParams = param_struct(
+    "ControllerParams", PARAMETERS, "cartesian_controller's parameters, typed (docs/interfaces.md)."
 )
 
 USAGE = usage_text(

@@ -43,6 +43,7 @@ from manip_kin.control.qp.tasks import PostureTask
 from manip_kin.control.resolved_rate import CartesianController
 from manip_kin.core.scene import Scene
 from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_model
+from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Seconds of pose (or joint) steps :func:`blocked_by` looks at, and how often it looks [ns].
 BLOCKED_WINDOW_S = 0.3
@@ -88,9 +89,9 @@ class CollisionInputs:
             node exits with code 2 and the message).
     """
 
-    def __init__(self, node, params: dict, warn):
+    def __init__(self, node, params: ParamStruct, warn):
         self.node = node
-        self.enabled = bool(params["collision_avoidance"])
+        self.enabled = bool(params.collision_avoidance)
         self.checker: CollisionChecker | None = None
         self.scene_input: SceneInput | None = None
         self._history: deque[QpOutput] = deque(maxlen=max(2, int(BLOCKED_WINDOW_S * node.rate_hz)))
@@ -100,14 +101,14 @@ class CollisionInputs:
         self._marker_shown = False
         if not self.enabled:
             return
-        collision_model = node_collision_model(node, params, "collision_avoidance", params["collision_pair_samples"])
-        self.checker = CollisionChecker(node.model, collision_model, params["mesh_search_path"])
+        collision_model = node_collision_model(node, params, "collision_avoidance", params.collision_pair_samples)
+        self.checker = CollisionChecker(node.model, collision_model, params.mesh_search_path)
         self.scene_input = SceneInput(node, self.checker, warn)
         self._marker_pub = node.create_publisher(MarkerArray, "markers", 10)
         node.get_logger().info(
             f"collision avoidance: {len(collision_model.geometries)} shapes on {len(collision_model.links)} links, "
             f"{len(collision_model.pairs.checked)} link pairs checked "
-            f"({'SRDF ' + params['srdf'] if params['srdf'] else 'pairs by sampling'}); obstacles on "
+            f"({'SRDF ' + params.srdf if params.srdf else 'pairs by sampling'}); obstacles on "
             f"{self.scene_input.topic}"
         )
 
@@ -130,7 +131,7 @@ class CollisionInputs:
 
     # --- configuration --------------------------------------------------------------------------
 
-    def configure(self, model, params: dict, plain: CartesianController, dt: float):
+    def configure(self, model, params: ParamStruct, plain: CartesianController, dt: float):
         """The law the controller is to step: the QP (collision avoidance or a posture), else
         ``plain``. Nothing changes here: the node swaps its ``law`` once its whole
         configuration is built (a refused change keeps the old one).
@@ -139,20 +140,20 @@ class CollisionInputs:
             ManipKinError: a posture of the wrong length, distances that do not fit (the
                 influence distance not above the safety distance).
         """
-        reference = params["posture_reference"]
+        reference = params.posture_reference
         posture = None
         if reference:
-            posture = PostureTask(np.array(reference, dtype=float), params["posture_gain"], params["posture_weight"])
+            posture = PostureTask(np.array(reference, dtype=float), params.posture_gain, params.posture_weight)
         if not (self.enabled or posture is not None):
             return plain
         config = QpConfig(
             controller=plain.config,
-            position_margin=params["position_limit_margin"],
+            position_margin=params.position_limit_margin,
             max_acceleration=None,  # the command filter limits acceleration and jerk
             posture=posture,
-            collision_safety_distance=params["collision_safety_distance"],
-            influence_distance=params["collision_influence_distance"],
-            collision_gain=params["collision_gain"],
+            collision_safety_distance=params.collision_safety_distance,
+            influence_distance=params.collision_influence_distance,
+            collision_gain=params.collision_gain,
         )
         qp = QpController(model, config, self.checker)
         if self.law is not None:
@@ -263,9 +264,9 @@ class CollisionInputs:
     def _nearest(self, output):
         """The nearest pair with its witness points at the node's newest ``q`` (computed again at
         the status rate: the step's output keeps only the pair's names), or None."""
-        if self.checker is None or self.node.q is None or output.nearest_pair is None:
+        if self.checker is None or self.node.inputs.q is None or output.nearest_pair is None:
             return None
-        near = self.checker.pair_distances(self.node.q, self.law.qp.config.influence_distance)
+        near = self.checker.pair_distances(self.node.inputs.q, self.law.qp.config.influence_distance)
         return min(near, key=lambda pair: pair.distance) if near else None
 
 

@@ -9,10 +9,9 @@ node's ``ros__parameters`` loads with ``--params-file``; its other keys (``has_p
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 from manip_kin.control.joint_limits import LIMIT_FIELDS, MAX_LIMIT_VALUE, JointLimit, JointLimits, default_joint_limits
 from manip_kin.core.model import RobotModel
+from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.params import ParamSpec
 
 _UNITS = {"velocity": "/s", "acceleration": "/s²", "deceleration": "/s²", "jerk": "/s³"}
@@ -58,10 +57,11 @@ def joint_limit_parameters(model: RobotModel) -> tuple[ParamSpec, ...]:
     return tuple(specs)
 
 
-def joint_limits_from_params(model: RobotModel, params: Mapping[str, object]) -> JointLimits:
-    """The :class:`JointLimits` the ``joint_limits.*`` values of ``params`` give."""
+def joint_limits_from_params(model: RobotModel, params: ParamStruct) -> JointLimits:
+    """The :class:`JointLimits` the ``joint_limits.*`` values of ``params`` give (declared as a group:
+    they are in ``params.dynamic``, see :func:`~manip_kin.ros.runtime.declared_params.declare_group`)."""
     per_joint = {
-        joint: JointLimit(**{field: params[parameter_name(joint, field)] for field in LIMIT_FIELDS})
+        joint: JointLimit(**{field: params.dynamic[parameter_name(joint, field)] for field in LIMIT_FIELDS})
         for joint in model.joint_names
     }
     return JointLimits.of(model, per_joint)

@@ -32,10 +32,13 @@ from manip_kin.errors import OperationError
 from manip_kin.recording.msgdef import full_definition_text
 from manip_kin.recording.reader import message_class
 from manip_kin.recording.tf_message import TF_STATIC_TOPIC, TF_TOPIC, tf_message_class
-from manip_kin.ros.runtime.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.ros.runtime.declared_params import declare_parameters
+from manip_kin.ros.runtime.param_struct import param_struct
+from manip_kin.ros.runtime.params import ParamSpec
 from manip_kin.ros.runtime.polling import RawSubscription, fast_path_problem
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
+from manip_kin.ros.runtime.usage import usage_text
 from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.topics import latest_state_qos
 from manip_kin.viz.live_feed import DEFAULT_VIEW_RATE_HZ, LIVE_TF_TOPICS, VIEW_TOPICS, Delivery, LiveFeed, ViewTopic
@@ -77,6 +80,9 @@ PARAMETERS = (
         maximum=100_000,  # a bounded queue: at most this many messages held per slow client
     ),
 )
+
+#: The parameters as a typed struct (what the node reads).
+LiveViewParams = param_struct("LiveViewParams", PARAMETERS, "live_view's parameters, typed (docs/interfaces.md).")
 
 USAGE = usage_text(
     NODE_NAME,
@@ -151,8 +157,8 @@ class LiveViewNode(Node):
         super().__init__(NODE_NAME, **node_kwargs)
         import foxglove
 
-        values = declare_parameters(self, PARAMETERS)
-        self._feed = LiveFeed(values["rate_hz"], values["frame_prefix"])
+        params = declare_parameters(self, LiveViewParams)
+        self._feed = LiveFeed(params.rate_hz, params.frame_prefix)
         self._problems = ThrottledLog(self.get_logger().warning, 5.0)
         self._lock = threading.Lock()  # the feed: intake thread vs. executor (status, live TF)
         self._foxglove_context = foxglove.Context()
@@ -164,18 +170,18 @@ class LiveViewNode(Node):
         self._add_channel(TF_TOPIC, "tf2_msgs/msg/TFMessage", latched=False)
         self._add_channel(TF_STATIC_TOPIC, "tf2_msgs/msg/TFMessage", latched=True)
         self._listener = _SubscribeListener(self._latched_ids)
-        self.address = values["address"]
+        self.address = params.address
         try:
             self._server = foxglove.start_server(
                 name=f"manip_kin {self.get_fully_qualified_name()}",
                 host=self.address,
-                port=values["port"],
+                port=params.port,
                 context=self._foxglove_context,
                 server_listener=self._listener,
-                message_backlog_size=values["message_backlog"],
+                message_backlog_size=params.message_backlog,
             )
         except Exception as error:  # noqa: BLE001 - the SDK raises its own error types
-            raise OperationError(f"cannot serve on {self.address}:{values['port']}: {error}") from None
+            raise OperationError(f"cannot serve on {self.address}:{params.port}: {error}") from None
         self.port = int(self._server.port)
         self._sent = 0
         self._tf_failures_logged = 0
@@ -189,7 +195,7 @@ class LiveViewNode(Node):
         intake = "raw takes in the intake thread" if not problem else f"public rclpy API ({problem})"
         self.get_logger().info(
             f"serving ws://{self.address}:{self.port} (Foxglove WebSocket), streams and /tf at most "
-            f"{values['rate_hz']:g} Hz; intake: {intake}"
+            f"{params.rate_hz:g} Hz; intake: {intake}"
         )
 
     # -- set-up ------------------------------------------------------------------------------

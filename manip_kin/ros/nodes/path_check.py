@@ -1,6 +1,6 @@
 """``trajectory_generator``'s collision check of a planned motion (parameter ``collision_check``).
 
-A line's configurations come from the reach check (:func:`~manip_kin.motion.lines.check_line_reachable`,
+A line's configurations come from the reach check (:func:`~manip_kin.motion.line_reach.check_line_reachable`,
 a sample every centimetre and 0.05 rad), a joint trajectory is sampled every 0.01 rad (or m)
 of its largest joint's travel; :func:`~manip_kin.collision.path.first_collision_along` finds
 the first sample nearer than ``collision_safety_distance``, and the refusal says at what
@@ -20,6 +20,7 @@ import numpy as np
 from manip_kin.collision.distances import CollisionChecker
 from manip_kin.collision.path import first_collision_along
 from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_model
+from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Joint travel between two samples of a joint trajectory [rad | m], and the most samples.
 JOINT_STEP = 0.01
@@ -40,14 +41,14 @@ class PathCheck:
         ManipKinError: no URDF for collision_check, a bad SRDF or a mesh not found (exit 2).
     """
 
-    def __init__(self, node, params: dict, warn):
-        self.enabled = bool(params["collision_check"])
-        self.safety_distance = params["collision_safety_distance"]
+    def __init__(self, node, params: ParamStruct, warn):
+        self.enabled = bool(params.collision_check)
+        self.safety_distance = params.collision_safety_distance
         self.scene_input: SceneInput | None = None
         if not self.enabled:
             return
         self.collision_model = node_collision_model(node, params, "collision_check")
-        self.checker = CollisionChecker(node.model, self.collision_model, params["mesh_search_path"])
+        self.checker = CollisionChecker(node.model, self.collision_model, params.mesh_search_path)
         self.scene_input = SceneInput(node, self.checker, warn)
         node.get_logger().info(
             f"collision check of every motion: {len(self.collision_model.pairs.checked)} link pairs, "

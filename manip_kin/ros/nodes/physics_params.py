@@ -6,6 +6,7 @@ import numpy as np
 
 from manip_kin.core.model import RobotModel
 from manip_kin.plant import PLANT_NAMES, KinematicPlant
+from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.params import ParamSpec
 
 PHYSICS_PARAMETERS = (
@@ -84,24 +85,24 @@ PHYSICS_PARAMETERS = (
 )
 
 
-def make_plant(model: RobotModel, q0: np.ndarray, params: dict, urdf_text: str | None):
-    """The plant ``params["plant"]`` names, at ``q0``; ``urdf_text``: the URDF the model came from, or None.
+def make_plant(model: RobotModel, q0: np.ndarray, params: ParamStruct, urdf_text: str | None):
+    """The plant ``params.plant`` names, at ``q0``; ``urdf_text``: the URDF the model came from, or None.
 
     Raises:
         ModelFileError: the URDF's inertials or collision shapes (plant mujoco).
         InputError: bad effort limits.
     """
-    if params["plant"] == "kinematic":
+    if params.plant == "kinematic":
         return KinematicPlant(model, q0)
     from manip_kin.plant.mujoco_model import JointDynamics
     from manip_kin.plant.mujoco_plant import MujocoPlant, PhysicsConfig, ServoGains
 
-    efforts = params["effort_limits"]
+    efforts = params.effort_limits
     config = PhysicsConfig(
-        rate_hz=params["physics_rate_hz"],
-        dynamics=JointDynamics(params["joint_damping"], params["joint_armature"], params["joint_friction"]),
-        servo=ServoGains(params["servo_velocity_gain"], params["servo_integral_gain"]),
+        rate_hz=params.physics_rate_hz,
+        dynamics=JointDynamics(params.joint_damping, params.joint_armature, params.joint_friction),
+        servo=ServoGains(params.servo_velocity_gain, params.servo_integral_gain),
         effort_limits=tuple(efforts) if efforts else None,
-        mesh_search_path=params["mesh_search_path"],
+        mesh_search_path=params.mesh_search_path,
     )
     return MujocoPlant(model, q0, config, urdf_text)

@@ -31,72 +31,31 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import ReliabilityPolicy
 
 from manip_kin.recording.errors import RecordingError
-from manip_kin.recording.qos import OfferedProfiles, default_offer
 from manip_kin.recording.reader import message_class
 from manip_kin.recording.tf_synthesis import TF_TOPICS, TfSynthesizer, write_tf
 from manip_kin.recording.write_failure import RecordingWriteError
 from manip_kin.recording.writer import RecordingWriter
 from manip_kin.ros.nodes.recorder_config import NODE_NAME, USAGE, read_config
+from manip_kin.ros.nodes.recorder_topics import (
+    RecordedTopic,
+    channel_offer,
+    manip_kin_type,
+    presubscription_qos,
+    requested_qos,
+)
 from manip_kin.ros.runtime.polling import RawSubscription, fast_path_problem
 from manip_kin.ros.runtime.runner import run_node
-from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 
-# Every manip_kin topic is subscribed at start, before any publisher is seen, so a one-shot
-# message (a goal sent by `manip_kin goal` right after its publisher appears) is not missed
-# while discovery catches up. Relative names resolve in the recorder's namespace.
-MANIP_KIN_TOPIC_TYPES = PIPELINE_TOPIC_TYPES
-LATCHED_TOPICS = frozenset({"robot_description"})
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_CHECK_PERIOD_S = 0.25
 INTAKE_PERIOD_S = 0.005
 LOST_CHECK_PERIOD_S = 0.5
-# Messages the middleware may queue per topic between two intake passes or while a
-# chunk is compressed: about 2 s of the 1 kHz joint states.
-SUBSCRIPTION_DEPTH = 2000
-
-
-def _manip_kin_type(topic: str) -> str:
-    """The type of a manip_kin topic in any namespace (``/left/joint_states``), else ""."""
-    if topic in MANIP_KIN_TOPIC_TYPES:
-        return MANIP_KIN_TOPIC_TYPES[topic]
-    name = topic.rsplit("/", 1)[-1]
-    return MANIP_KIN_TOPIC_TYPES.get(name, "")
-
-
-def requested_qos(publisher_profiles: list[Any]) -> QoSProfile:
-    """rosbag2's rule: reliable / transient-local only if every publisher offers it; deep queue."""
-    reliable = all(p.reliability == ReliabilityPolicy.RELIABLE for p in publisher_profiles)
-    transient = all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publisher_profiles)
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
-        depth=SUBSCRIPTION_DEPTH,
-        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient else DurabilityPolicy.VOLATILE,
-    )
-
-
-@dataclass
-class _RawTopic:
-    """A raw subscription handle the executor never sees (the intake thread drains it)."""
-
-    name: str
-    type_name: str
-    message_type: type
-    intake: RawSubscription
-    last_sequence: int | None = None
-    sequence_gaps: int = 0
-    middleware_lost: int = 0
-    single_publisher: bool = True
-    received: int = 0
-    presubscribed: bool = False  # subscribed before any publisher was seen
 
 
 class RecorderNode(Node):
@@ -121,7 +80,7 @@ class RecorderNode(Node):
         self._writer = RecordingWriter(output, compression=compression)
         # The writer is shared by the intake thread and the executor thread (discovery, flush).
         self._lock = threading.Lock()
-        self._topics: dict[str, _RawTopic] = {}
+        self._topics: dict[str, RecordedTopic] = {}
         self._skipped: set[str] = set()
         self._stopping = threading.Event()
         self._finished_line: str | None = None
@@ -129,7 +88,7 @@ class RecorderNode(Node):
         self._write_error: RecordingWriteError | None = None
         if not self._all_topics:
             for topic in sorted(self._wanted):
-                known_type = _manip_kin_type(topic)
+                known_type = manip_kin_type(topic)
                 if known_type:
                     self._subscribe(topic, [], [known_type])
         self._discover()
@@ -199,18 +158,10 @@ class RecorderNode(Node):
             qos = requested_qos([p.qos_profile for p in publishers])
             with self._lock:
                 self._add_channel(topic, type_name, publishers)
-        else:
-            # As manip_kin's own publishers offer it: reliable, transient local for the
-            # description. The channel is added with the first message, when the publisher is known.
-            latched = topic.rsplit("/", 1)[-1] in LATCHED_TOPICS
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST,
-                depth=1 if latched else SUBSCRIPTION_DEPTH,
-                reliability=ReliabilityPolicy.RELIABLE,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-            )
+        else:  # the channel is added with the first message, when the publisher is known
+            qos = presubscription_qos(topic)
         intake = RawSubscription(self, message_type, topic, qos)
-        entry = _RawTopic(
+        entry = RecordedTopic(
             topic,
             type_name,
             message_type,
@@ -226,22 +177,10 @@ class RecorderNode(Node):
         """Register ``topic`` with the writer, with its publishers' QoS and type hash (lock held)."""
         if self._writer.has_topic(topic):
             return
-        if publishers:
-            offered = OfferedProfiles.from_rclpy(p.qos_profile for p in publishers)
-            type_hash = str(publishers[0].topic_type_hash)
-        else:  # the publisher is already gone: record what manip_kin's publishers offer
-            latched = topic.rsplit("/", 1)[-1] in LATCHED_TOPICS
-            offered = default_offer(transient_local=latched, depth=1 if latched else 10)
-            type_hash = ""
-        self._writer.add_topic(
-            topic,
-            type_name,
-            offered_qos_profiles=offered,
-            # An unset hash (a publisher from before Iron) is not RIHS01: use the local one.
-            type_description_hash=type_hash if type_hash.startswith("RIHS01_") else None,
-        )
+        offered, type_hash = channel_offer(topic, publishers)
+        self._writer.add_topic(topic, type_name, offered_qos_profiles=offered, type_description_hash=type_hash)
 
-    def _resubscribe(self, entry: _RawTopic, publishers: list, types: list[str]) -> None:
+    def _resubscribe(self, entry: RecordedTopic, publishers: list, types: list[str]) -> None:
         """Replace a pre-subscription by one whose QoS matches the publishers found."""
         with self._lock:
             del self._topics[entry.name]
@@ -306,7 +245,7 @@ class RecorderNode(Node):
                 if not self._record(entry, data, info):
                     return
 
-    def _record(self, entry: _RawTopic, data: bytes, info: dict) -> bool:
+    def _record(self, entry: RecordedTopic, data: bytes, info: dict) -> bool:
         """Write one message; False once the recording must not take more."""
         with self._lock:
             if self._finished_line is not None or (
@@ -329,15 +268,7 @@ class RecorderNode(Node):
         entry.received += 1
         sequence = info.get("publication_sequence_number")
         if sequence:
-            if entry.last_sequence is not None and entry.single_publisher and sequence > entry.last_sequence + 1:
-                # A second publisher that discovery has not reported yet numbers its own
-                # messages: ask the graph before calling the gap a loss.
-                publishers = self._publishers_or_none(entry.name)
-                if publishers is None or len(publishers) <= 1:
-                    entry.sequence_gaps += sequence - entry.last_sequence - 1
-                else:
-                    entry.single_publisher = False
-            entry.last_sequence = sequence  # a restarted publisher counts from 1 again: no gap
+            entry.sequence_seen(sequence, lambda: self._publishers_or_none(entry.name))
         if self._max_messages and count >= self._max_messages:
             self._stop(f"max_messages ({self._max_messages}) reached")
             return False
@@ -352,7 +283,7 @@ class RecorderNode(Node):
         except Exception:  # noqa: BLE001 - the context can end between the check and the query
             return None
 
-    def _synthesise_tf(self, entry: _RawTopic, data: bytes, received: int) -> None:
+    def _synthesise_tf(self, entry: RecordedTopic, data: bytes, received: int) -> None:
         """Write the TF this message gives (lock held); a failure stops synthesis, not the recording."""
         try:
             for out in self._tf.feed(entry.name, entry.type_name, data, received):

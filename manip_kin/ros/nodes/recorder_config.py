@@ -10,7 +10,10 @@ from rclpy.node import Node
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.tf_synthesis import DEFAULT_TF_RATE_HZ, TF_TOPICS
 from manip_kin.recording.writer import COMPRESSION_CHOICES
-from manip_kin.ros.runtime.params import ParamSpec, declare_parameters, usage_text
+from manip_kin.ros.runtime.declared_params import declare_parameters
+from manip_kin.ros.runtime.param_struct import param_struct
+from manip_kin.ros.runtime.params import ParamSpec
+from manip_kin.ros.runtime.usage import usage_text
 from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 
 NODE_NAME = "recorder"
@@ -70,6 +73,9 @@ PARAMETERS = (
 )
 
 
+#: The parameters as a typed struct (what the node reads).
+RecorderParams = param_struct("RecorderParams", PARAMETERS, "recorder's parameters, typed (docs/interfaces.md).")
+
 USAGE = usage_text(
     NODE_NAME,
     "Record topics to a rosbag2-compatible MCAP file (ros2 bag, Foxglove, rosbags read it).\n"
@@ -121,16 +127,16 @@ def read_config(node: Node) -> RecorderConfig:
         InvalidArgumentError: a value of the wrong type or outside its range, naming the parameter.
         RecordingError: nothing to record.
     """
-    values = declare_parameters(node, PARAMETERS)
-    if not values["all_topics"] and not values["topics"]:
+    params = declare_parameters(node, RecorderParams)
+    if not params.all_topics and not params.topics:
         raise RecordingError("parameter topics is empty and all_topics is false: nothing to record")
     return RecorderConfig(
-        tuple(values["topics"]),
-        values["all_topics"],
-        values["output"] or default_output(),
-        values["compression"],
-        values["duration"],
-        values["max_messages"],
-        values["tf_rate_hz"],
-        values["frame_prefix"],
+        tuple(params.topics),
+        params.all_topics,
+        params.output or default_output(),
+        params.compression,
+        params.duration,
+        params.max_messages,
+        params.tf_rate_hz,
+        params.frame_prefix,
     )

@@ -20,6 +20,7 @@ from rclpy.node import Node
 from manip_kin.core.model import RobotModel
 from manip_kin.core.robots import load_robot, with_velocity_limits
 from manip_kin.ros.nodes.robot_description import PARAMETER, DescriptionWatch
+from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.params import ParamSpec
 
 
@@ -69,7 +70,9 @@ def model_parameters(robot_default: str) -> tuple[ParamSpec, ...]:
     )
 
 
-def load_node_model(node: Node, params: dict, switch: Callable[[RobotModel], str | None] | None = None) -> RobotModel:
+def load_node_model(
+    node: Node, params: ParamStruct, switch: Callable[[RobotModel], str | None] | None = None
+) -> RobotModel:
     """The model the parameters name, or the one on ``robot_description`` when ``robot`` is empty.
 
     Args:
@@ -88,11 +91,12 @@ def load_node_model(node: Node, params: dict, switch: Callable[[RobotModel], str
     """
     from manip_kin.core.urdf import joints_without_velocity_limit
 
-    if params["robot"]:
-        model = _with_limits(load_robot(params["robot"], **_links(params)), params)
-        origin = f"robot {params['robot']!r}"
+    if params.robot:
+        model = _with_limits(load_robot(params.robot, **_links(params)), params)
+        origin = f"robot {params.robot!r}"
     else:
-        watch = DescriptionWatch(node, params.get(PARAMETER) or "")
+        # robot_description_publisher is declared where robot is empty by default.
+        watch = DescriptionWatch(node, getattr(params, PARAMETER, ""))
         description = watch.wait()
         load = _description_loader(params, watch.topic)
         model = load(description.text)
@@ -115,15 +119,19 @@ def load_node_model(node: Node, params: dict, switch: Callable[[RobotModel], str
     return model
 
 
-def _links(params: dict) -> dict:
-    return {name: params[name] or None for name in ("base_link", "tip_link", "tool_link")}
+def _links(params: ParamStruct) -> dict:
+    return {
+        "base_link": params.base_link or None,
+        "tip_link": params.tip_link or None,
+        "tool_link": params.tool_link or None,
+    }
 
 
-def _with_limits(model: RobotModel, params: dict) -> RobotModel:
-    return with_velocity_limits(model, params["velocity_limits"]) if params["velocity_limits"] else model
+def _with_limits(model: RobotModel, params: ParamStruct) -> RobotModel:
+    return with_velocity_limits(model, params.velocity_limits) if params.velocity_limits else model
 
 
-def _description_loader(params: dict, topic: str) -> Callable[[str], RobotModel]:
+def _description_loader(params: ParamStruct, topic: str) -> Callable[[str], RobotModel]:
     """URDF text -> the model of the node's chain parameters."""
     from manip_kin.core.urdf import load_urdf_string
 

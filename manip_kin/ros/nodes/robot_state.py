@@ -24,25 +24,18 @@ from visualization_msgs.msg import MarkerArray
 from manip_kin.core.bounds import InputBounds
 from manip_kin.core.model import RobotModel
 from manip_kin.core.robot_files import is_urdf_file
-from manip_kin.core.robots import bundled_robot_names, resolve_robot_path
+from manip_kin.core.robots import resolve_robot_path
 from manip_kin.core.scene import Scene
 from manip_kin.core.urdf import model_to_urdf, with_chain_hint
 from manip_kin.errors import InvalidArgumentError, JointCountError
-from manip_kin.plant import KinematicPlant
-from manip_kin.ros.nodes.physics_params import PHYSICS_PARAMETERS, make_plant
-from manip_kin.ros.nodes.robot_model import load_node_model, model_parameters
+from manip_kin.ros.nodes.physics_params import make_plant
+from manip_kin.ros.nodes.robot_model import load_node_model
+from manip_kin.ros.nodes.robot_state_interface import NODE_NAME, USAGE, RobotStateParams
 from manip_kin.ros.nodes.visuals import RobotVisuals
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
 from manip_kin.ros.runtime.params import (
-    REALTIME_PRIORITY,
-    SCHEDULER_SLICE,
-    LiveParameters,
-    ParamSpec,
-    declare_parameters,
-    diagnostics_rate,
-    loop_rate,
     period_ns,
-    usage_text,
 )
 from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.runtime.rate_loop import stats_key_values
@@ -55,94 +48,6 @@ from manip_kin.ros.wire.scene_messages import TOPIC as COLLISION_OBJECTS
 from manip_kin.ros.wire.scene_messages import apply_marker_array
 from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
 from manip_kin.ros.wire.validation import command_problem
-
-NODE_NAME = "robot_state"
-
-PARAMETERS = (
-    *model_parameters("genova7"),
-    ParamSpec(
-        "initial_positions",
-        "float_list",
-        None,
-        "joint positions at start, model joint order",
-        "rad | m",
-        minimum=-1e4,  # far beyond any joint's range (the limits are checked too); keeps FK finite
-        maximum=1e4,
-        default_text="the robot's scenario start, else zeros clipped into the limits",
-    ),
-    loop_rate("integration and publishing rate"),
-    # 1 ms (a period at 1 kHz) to a minute.
-    ParamSpec(
-        "command_timeout",
-        "float",
-        0.1,
-        "a command older than this counts as zero velocity",
-        "s",
-        minimum=1e-3,
-        maximum=60.0,
-        tunable=True,
-    ),
-    ParamSpec(
-        "base_frame",
-        "str",
-        None,
-        "frame id of the published poses and twists",
-        default_text="the robot's base frame (base_link)",
-    ),
-    diagnostics_rate(2.0, "rate of the loop statistics on /diagnostics (0: off)", off=True),
-    ParamSpec("frame_prefix", "str", "", "prepended to every TF frame id (as robot_state_publisher's)"),
-    # Visuals: a viewer needs /tf at 0.1 Hz at least and gets nothing from more than one
-    # per cycle of a 1 kHz loop; markers (10 Hz by default) likewise; a trail of two minutes
-    # at its 20 ms spacing is 6000 points.
-    ParamSpec("tf_rate_hz", "float", 50.0, "rate of /tf (where tf2_msgs is installed)", "Hz", minimum=0.1, maximum=1e3),
-    ParamSpec(
-        "markers_rate_hz",
-        "float",
-        10.0,
-        "rate of the markers topic (0: off)",
-        "Hz",
-        minimum=0.1,
-        maximum=1e3,
-        zero_is_off=True,
-    ),
-    ParamSpec("trail_duration", "float", 5.0, "length of the tool trail marker", "s", minimum=0.02, maximum=120.0),
-    *PHYSICS_PARAMETERS,
-    REALTIME_PRIORITY,
-    SCHEDULER_SLICE,
-)
-
-USAGE = usage_text(
-    NODE_NAME,
-    "Simulated arm: integrates the latest joint velocity command at rate_hz within the joint\n"
-    "position and velocity limits (a command above a velocity limit is scaled down as a whole,\n"
-    "keeping its direction) and publishes the joint state, the end-effector and tool poses and\n"
-    "twists every cycle. A command older than command_timeout counts as zero; a command with the\n"
-    "wrong length or a non-finite value is rejected with a log line. With plant:=mujoco the arm\n"
-    "is MuJoCo physics stepped at physics_rate_hz: gravity, a PI velocity servo per joint with\n"
-    "the URDF's effort limits, joint damping/armature/friction, and contact with the obstacles on\n"
-    "collision_objects (contact force on /diagnostics); joint_states then carries effort.",
-    PARAMETERS,
-    subscribes=[
-        ("joint_velocity_commands", "std_msgs/Float64MultiArray", "joint rates [rad/s | m/s], model joint order"),
-        (COLLISION_OBJECTS, "visualization_msgs/MarkerArray", "obstacles in the base frame (plant mujoco)"),
-    ],
-    publishes=[
-        ("joint_states", "sensor_msgs/JointState", "name, position, velocity (plant mujoco: effort), stamped"),
-        ("ee_pose", "geometry_msgs/PoseStamped", "end effector in the base frame"),
-        ("tool_pose", "geometry_msgs/PoseStamped", "tool (end effector if no tool) in the base frame"),
-        ("ee_twist", "geometry_msgs/TwistStamped", "end-effector velocity w.r.t. base, in base"),
-        ("tool_twist", "geometry_msgs/TwistStamped", "tool velocity w.r.t. base, in base"),
-        ("robot_description", "std_msgs/String", "the URDF file as given (YAML robots: generated), transient local"),
-        ("/tf, /tf_static", "tf2_msgs/TFMessage", "link transforms, where tf2_msgs is installed"),
-        ("markers", "visualization_msgs/MarkerArray", "goal axes, planned path, tool trail, joint limits"),
-        ("/diagnostics", "diagnostic_msgs/DiagnosticArray", "loop rate and timing, command state, contact force"),
-    ],
-    example=f"{NODE_NAME} --ros-args -p robot:=genova7 -p rate_hz:=1000  (robots: {', '.join(bundled_robot_names())})",
-)
-
-
-#: The kinematic plant under its former name (tests and callers from before the plants).
-JointIntegrator = KinematicPlant
 
 
 def initial_positions(model: RobotModel, values) -> np.ndarray:
@@ -165,18 +70,18 @@ class RobotStateNode(LoopingNode):
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
-        params = declare_parameters(self, PARAMETERS)
+        params = declare_parameters(self, RobotStateParams)
         self.model = load_node_model(self, params)
         self.urdf_text = self._description_text(params)
-        q0 = initial_positions(self.model, params["initial_positions"])
+        q0 = initial_positions(self.model, params.initial_positions)
         self.plant = make_plant(self.model, q0, params, self.urdf_text if self._from_urdf else None)
         for note in getattr(self.plant, "notes", ()):
             self.get_logger().info(f"plant {self.plant.name}: {note}")
         self.scene = Scene()
-        self.base_frame = params["base_frame"] or self.model.base_frame
-        self.rate_hz = params["rate_hz"]
+        self.base_frame = params.base_frame or self.model.base_frame
+        self.rate_hz = params.rate_hz
         self._set_parameters(params)
-        LiveParameters(self, PARAMETERS, self._set_parameters)
+        LiveParameters(self, params, self._set_parameters)
 
         self._max_command = InputBounds.of(self.model).max_command
         self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", latest_state_qos(10))
@@ -215,10 +120,10 @@ class RobotStateNode(LoopingNode):
             self,
             self.model,
             self.urdf_text,
-            params["frame_prefix"],
-            params["tf_rate_hz"],
-            params["markers_rate_hz"],
-            params["trail_duration"],
+            params.frame_prefix,
+            params.tf_rate_hz,
+            params.markers_rate_hz,
+            params.trail_duration,
         )
         self.visuals.publish_static(time.time_ns())
         self.get_logger().info(self.visuals.tf_log)
@@ -226,34 +131,26 @@ class RobotStateNode(LoopingNode):
             f"robot {self.model.name} ({self.model.dof} joints) at {self.rate_hz:g} Hz, plant {self.plant.name}, "
             f"q0 = {np.round(self.plant.q, 4).tolist()}, frame {self.base_frame!r}"
         )
-        self.start_loop(self.rate_hz, self._cycle, params["realtime_priority"], params["scheduler_slice"])
+        self.start_loop(self.rate_hz, self._cycle, params.realtime_priority, params.scheduler_slice)
 
-    def _set_parameters(self, params: dict) -> None:
-        """The tunable parameters in ``params`` (at start, and on a live change: the next cycle uses them)."""
-        if "command_timeout" in params:
-            self.command_timeout_ns = int(params["command_timeout"] * 1e9)
-        if "diagnostics_rate_hz" in params:
-            rate = params["diagnostics_rate_hz"]
-            self._diagnostics_period_ns = period_ns(rate)
+    def _set_parameters(self, params: RobotStateParams) -> None:
+        """The tunable parameters of ``params`` (at start, and on a live change: the next cycle uses them)."""
+        self.command_timeout_ns = int(params.command_timeout * 1e9)
+        self._diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
 
-    @property
-    def integrator(self):
-        """The plant (its name from before there were two kinds)."""
-        return self.plant
-
-    def _description_text(self, params: dict) -> str:
+    def _description_text(self, params: RobotStateParams) -> str:
         """The URDF to publish: the file as given, as robot_state_publisher does (with one element naming the
         chain when ``tip_link``/``tool_link`` chose it), or one generated from a robot YAML."""
-        path = resolve_robot_path(params["robot"]) if params["robot"] else None
+        path = resolve_robot_path(params.robot) if params.robot else None
         self._from_urdf = path is not None and is_urdf_file(path)
         if not self._from_urdf:
             return model_to_urdf(self.model)
         text = path.read_text(encoding="utf-8", errors="replace")
-        if params["tip_link"] or params["tool_link"]:
+        if params.tip_link or params.tool_link:
             from manip_kin.core.urdf.document import UrdfTree
 
-            tip = params["tip_link"] or UrdfTree(text, str(path)).default_tip(self.model.base_frame)
-            text = with_chain_hint(text, tip, params["tool_link"] or None)
+            tip = params.tip_link or UrdfTree(text, str(path)).default_tip(self.model.base_frame)
+            text = with_chain_hint(text, tip, params.tool_link or None)
         return text
 
     def _take_commands(self, now_ns: int) -> None:

@@ -20,18 +20,19 @@ from manip_kin.collision.distances import CollisionChecker
 from manip_kin.core.robot_files import is_urdf_file
 from manip_kin.core.scene import Scene
 from manip_kin.errors import InvalidArgumentError
+from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Queued ``collision_objects`` arrays kept for the loop (markers are incremental: keep them all).
 SCENE_DEPTH = 50
 
 
-def robot_urdf(params: dict, description_text: str | None, feature: str) -> str | Path:
+def robot_urdf(params: ParamStruct, description_text: str | None, feature: str) -> str | Path:
     """The URDF the collision geometry comes from: the ``robot`` file, or the description's text.
 
     Raises:
         InvalidArgumentError: ``robot`` names a bundled robot or a robot YAML (no geometry).
     """
-    robot = params["robot"]
+    robot = params.robot
     if not robot:
         return description_text
     if Path(robot).is_file() and is_urdf_file(robot):
@@ -42,7 +43,7 @@ def robot_urdf(params: dict, description_text: str | None, feature: str) -> str 
     )
 
 
-def node_collision_model(node, params: dict, feature: str, samples: int | None = None) -> CollisionModel:
+def node_collision_model(node, params: ParamStruct, feature: str, samples: int | None = None) -> CollisionModel:
     """The collision model of ``node.model`` with the node's ``srdf`` and ``mesh_search_path``.
 
     Raises:
@@ -52,8 +53,8 @@ def node_collision_model(node, params: dict, feature: str, samples: int | None =
     return load_collision_model(
         node.model,
         robot_urdf(params, getattr(node, "robot_description_text", None), feature),
-        srdf=params["srdf"] or None,
-        mesh_search_path=params["mesh_search_path"],
+        srdf=params.srdf or None,
+        mesh_search_path=params.mesh_search_path,
         **options,
     )
 

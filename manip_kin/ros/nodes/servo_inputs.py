@@ -95,7 +95,7 @@ class ServoInputs:
         self._warn(f"{what}:" + problem.kind, f"rejected {topic}: {problem}; command not used")
 
     def _twist_problem(self, msg: TwistStamped) -> Problem | None:
-        bounds = self.node.bounds
+        bounds = self.node.inputs.bounds
         problem = twist_problem(
             msg, msg.header.frame_id, "twist command", bounds.max_twist_linear, bounds.max_twist_angular
         )

@@ -3,7 +3,7 @@
 On each valid ``line_target`` the node plans a :class:`~manip_kin.motion.lines.LineTrajectory`
 from the tool pose of the newest ``joint_states`` (its own FK: any driver's joint states
 will do, no robot_state needed), checks the arm can follow it from that configuration
-(:func:`~manip_kin.motion.lines.check_line_reachable`),
+(:func:`~manip_kin.motion.line_reach.check_line_reachable`),
 publishes it on ``planned_path`` and then, every cycle of its
 :class:`~manip_kin.ros.runtime.rate_loop.RateLoop`, publishes the sampled ``goal_pose`` and
 ``goal_twist`` until the end. At the end it publishes the final pose once with a zero
@@ -27,37 +27,38 @@ import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, TwistStamped
-from nav_msgs.msg import Path
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from manip_kin.control.generator_supervisor import GeneratorState, GeneratorSupervisor
-from manip_kin.core.bounds import UNBOUNDED, InputBounds
+from manip_kin.core.bounds import InputBounds
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.pose_rows import parse_task
-from manip_kin.errors import InvalidArgumentError, ManipKinError, Problem
-from manip_kin.motion.joint_trajectory import JointTrajectoryPlan, plan_joint_trajectory
+from manip_kin.errors import ManipKinError, Problem
+from manip_kin.motion.joint_trajectory import plan_joint_trajectory
+from manip_kin.motion.line_reach import check_line_reachable
 from manip_kin.motion.line_timing import constant_scaling_problem, line_limits_problem
-from manip_kin.motion.lines import LineTrajectory, MotionLimits, check_line_reachable
-from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters, joint_limits_from_params
+from manip_kin.motion.lines import LineTrajectory
+from manip_kin.ros.nodes.joint_limit_params import joint_limit_parameters
 from manip_kin.ros.nodes.path_check import PathCheck, joint_path
 from manip_kin.ros.nodes.robot_description import joints_problem
 from manip_kin.ros.nodes.robot_model import load_node_model
-from manip_kin.ros.nodes.trajectory_generator_interface import NODE_NAME, PARAMETERS, STATES, USAGE  # noqa: F401 - re-exported
+from manip_kin.ros.nodes.trajectory_generator_interface import NODE_NAME, USAGE, GeneratorParams
+from manip_kin.ros.nodes.trajectory_generator_outputs import MotionStream
+from manip_kin.ros.nodes.trajectory_generator_params import check_limits, generator_settings
+from manip_kin.ros.runtime.declared_params import LiveParameters, declare_group, declare_parameters
 from manip_kin.ros.runtime.looping_node import LoopingNode
-from manip_kin.ros.runtime.params import LiveParameters, declare_parameters, period_ns
+from manip_kin.ros.runtime.params import period_ns
 from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.runtime.rate_loop import stats_key_values
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
-from manip_kin.ros.wire.cdr import JointStateCdr, PoseStampedCdr, TwistStampedCdr
 from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.joint_messages import trajectory_points
-from manip_kin.ros.wire.messages import make_pose_stamped, ns_to_stamp, pose_stamped_to_matrix, stamp_key, stamp_to_ns
-from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
+from manip_kin.ros.wire.messages import ns_to_stamp, pose_stamped_to_matrix, stamp_key, stamp_to_ns
+from manip_kin.ros.wire.topics import latest_state_qos
 from manip_kin.ros.wire.validation import InvalidMessageError, JointStateMapper, pose_problem
 
 
@@ -66,41 +67,30 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     def __init__(self, **node_kwargs):
         super().__init__(NODE_NAME, **node_kwargs)
-        params = declare_parameters(self, PARAMETERS)
+        params = declare_parameters(self, GeneratorParams)
         self.model = load_node_model(self, params, self._switch_model)
         limit_specs = joint_limit_parameters(self.model)
-        params.update(declare_parameters(self, limit_specs))
-        self.base_frame = params["base_frame"] or self.model.base_frame
-        self.rate_hz = params["rate_hz"]
-        self.supervisor = GeneratorSupervisor(period_ns(params["diagnostics_rate_hz"]))
+        params = declare_group(self, params, limit_specs)
+        self.base_frame = params.base_frame or self.model.base_frame
+        self.rate_hz = params.rate_hz
+        self.supervisor = GeneratorSupervisor(period_ns(params.diagnostics_rate_hz))
         self._params = params
         self.bounds = InputBounds.of(self.model)
         self.path_check = PathCheck(self, params, ThrottledLog(self.get_logger().warning, 1.0))
         self._configure(params)
-        LiveParameters(self, PARAMETERS + limit_specs, self._set_parameters)
+        LiveParameters(self, params, self._set_parameters, limit_specs)
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
         # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
         # not turning 1 kHz of state messages into Python objects keeps this loop cheap.
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", latest_state_qos(1))
-        self._goal_pub = self.create_publisher(PoseStamped, "goal_pose", STREAM_DEPTH)
-        self._twist_pub = self.create_publisher(TwistStamped, "goal_twist", STREAM_DEPTH)
-        self._reference_pub = self.create_publisher(JointState, "joint_reference", STREAM_DEPTH)
+        self.stream = MotionStream(self, self.base_frame, self.model.joint_names)
         # The service only sets the flag; the loop stops the motion (one writer of the state).
         self._stop_requested = False
         self.create_service(Trigger, "~/stop", self._on_stop)
-        latched = QoSProfile(
-            depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
-        )
-        self._path_pub = self.create_publisher(Path, "planned_path", latched)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._goal_cdr = PoseStampedCdr(self.base_frame)
-        self._twist_cdr = TwistStampedCdr(self.base_frame)
         self._mapper = JointStateMapper(self.model.joint_names, self.bounds.position_lower, self.bounds.position_upper)
-        self._last_goal_pose: np.ndarray | None = None
-        self._last_reference: np.ndarray | None = None
-        self._reference_cdr = JointStateCdr(self.model.joint_names)
 
         self._start_stamp_ns = 0
         self._joint_state_msg: JointState | None = None
@@ -117,8 +107,8 @@ class TrajectoryGeneratorNode(LoopingNode):
         self.start_loop(
             self.rate_hz,
             self._cycle,
-            params["realtime_priority"],
-            params["scheduler_slice"],
+            params.realtime_priority,
+            params.scheduler_slice,
             wake_on=(self._target_sub,),
         )
 
@@ -139,35 +129,25 @@ class TrajectoryGeneratorNode(LoopingNode):
 
     # --- parameters ----------------------------------------------------------------------------
 
-    def _configure(self, params: dict) -> None:
+    def _configure(self, params: GeneratorParams) -> None:
         """Limits and checks from ``params`` (at start and on a live change; the next line uses them).
 
         Raises:
             ManipKinError: limits the planner cannot use.
         """
-        limits = MotionLimits(
-            max_linear_velocity=params["max_linear_velocity"],
-            max_linear_acceleration=params["max_linear_acceleration"],
-            max_angular_velocity=params["max_angular_velocity"],
-            max_angular_acceleration=params["max_angular_acceleration"],
-        )
-        _check_limits(limits, self.bounds)
-        self.joint_limits = joint_limits_from_params(self.model, params)
-        self.limits = limits
-        task = parse_task(params["task"] or None, self.model)
-        self.time_scaling = params["time_scaling"]
-        self.joint_time_scaling = params["joint_time_scaling"]
-        self.task = task
-        self.check_reach = params["check_reach"]
-        self._joint_state_timeout_ns = int(params["joint_state_timeout"] * 1e9)
-        self._quaternion_tolerance = params["quaternion_tolerance"]
-        self._path_points = max(2, params["path_points"])
-        self.path_check.safety_distance = params["collision_safety_distance"]
-        self.supervisor.throttle.period_ns = period_ns(params["diagnostics_rate_hz"])
+        settings = generator_settings(self.model, self.bounds, params)
+        self.limits, self.joint_limits, self.task = settings.limits, settings.joint_limits, settings.task
+        self.time_scaling = settings.time_scaling
+        self.joint_time_scaling = settings.joint_time_scaling
+        self.check_reach = settings.check_reach
+        self._joint_state_timeout_ns = settings.joint_state_timeout_ns
+        self._quaternion_tolerance = settings.quaternion_tolerance
+        self._path_points = settings.path_points
+        self.path_check.safety_distance = settings.collision_safety_distance
+        self.supervisor.throttle.period_ns = settings.diagnostics_period_ns
 
-    def _set_parameters(self, updates: dict) -> str | None:
+    def _set_parameters(self, params: GeneratorParams) -> str | None:
         """Live change of tunable parameters: None once in use (from the next line on), else why not."""
-        params = {**self._params, **updates}
         try:
             self._configure(params)
         except ManipKinError as error:  # raised before anything changed
@@ -187,8 +167,8 @@ class TrajectoryGeneratorNode(LoopingNode):
             return problem
         bounds = InputBounds.of(model)
         try:
-            _check_limits(self.limits, bounds)
-            task = parse_task(self._params["task"] or None, model)
+            check_limits(self.limits, bounds)
+            task = parse_task(self._params.task or None, model)
             start_frame = model.frame_index(model.default_frame)
         except ManipKinError as error:
             return f"cannot plan for the new model {model.name!r} as configured: {error}"
@@ -268,7 +248,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             return None
         detail = f"joint trajectory of {plan.point_count} point(s) in {plan.duration:.3f} s"
         times = np.linspace(0.0, plan.duration, self._path_points)
-        self._publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
+        self.stream.publish_path([frame_pose(self.model, plan.sample(t)[0]) for t in times])
         # It starts once planned and published (that takes a few ms): its first reference is
         # then where the arm is.
         now_ns = self._start_now()
@@ -325,16 +305,8 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"{'pre-empted the running motion; ' if preempted else ''}streaming a {self.time_scaling} line "
             f"from {np.round(start[:3, 3], 4).tolist()} to {np.round(goal[:3, 3], 4).tolist()}: {detail}"
         )
-        self._publish_path(line.sample_path(self._path_points))
+        self.stream.publish_path(line.sample_path(self._path_points))
         return True
-
-    def _publish_path(self, poses) -> None:
-        path = Path()
-        stamp = self.get_clock().now().to_msg()
-        path.header.stamp = stamp
-        path.header.frame_id = self.base_frame
-        path.poses = [make_pose_stamped(pose, self.base_frame, stamp) for pose in poses]
-        self._path_pub.publish(path)
 
     # --- the cycle -------------------------------------------------------------------------------
 
@@ -342,15 +314,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         """After a failed cycle: stop streaming and hold the last goal (sent again, at rest)."""
         if not self.supervisor.stop("stopped streaming after a cycle error; holding the last goal"):
             return
-        if isinstance(self.supervisor.motion, JointTrajectoryPlan):
-            if self._last_reference is not None:
-                stamp_ns = self.get_clock().now().nanoseconds
-                zeros = np.zeros_like(self._last_reference)
-                self._reference_pub.publish(self._reference_cdr.encode(stamp_ns, self._last_reference, zeros))
-        elif self._last_goal_pose is not None:
-            stamp_ns = self.get_clock().now().nanoseconds
-            self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, self._last_goal_pose))
-            self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, np.zeros(3), np.zeros(3)))
+        self.stream.hold(self.supervisor.motion)
 
     def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self._stop_requested = True
@@ -377,15 +341,7 @@ class TrajectoryGeneratorNode(LoopingNode):
         if timing is not None:
             t, finished = timing
             stamp_ns = self._start_stamp_ns + int(t * 1e9)
-            if isinstance(supervisor.motion, JointTrajectoryPlan):
-                q, qdot = supervisor.motion.sample(t)
-                self._reference_pub.publish(self._reference_cdr.encode(stamp_ns, q, qdot))
-                self._last_reference = q
-            else:
-                pose, (angular, linear) = supervisor.motion.sample(t)
-                self._goal_pub.publish(self._goal_cdr.encode(stamp_ns, pose))
-                self._last_goal_pose = pose
-                self._twist_pub.publish(self._twist_cdr.encode(stamp_ns, angular, linear))
+            self.stream.publish(supervisor.motion, t, stamp_ns)
             if finished:
                 supervisor.finish(stamp_key(ns_to_stamp(stamp_ns)))
                 self.get_logger().info(f"{supervisor.motion_kind} finished after {t:.3f} s; holding its end")
@@ -418,20 +374,6 @@ class TrajectoryGeneratorNode(LoopingNode):
         level = self.diagnostic_level(supervisor.level)
         status = make_diagnostic_status(self.status_name, level, supervisor.state, self.model.name, values)
         self._diagnostics_pub.publish(make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
-
-
-def _check_limits(limits: MotionLimits, bounds: InputBounds) -> None:
-    """Refuse speed limits far beyond what the arm can do (a typo such as 1e30 m/s)."""
-    for name, value, valid in (
-        ("max_linear_velocity", limits.max_linear_velocity, bounds.max_twist_linear),
-        ("max_angular_velocity", limits.max_angular_velocity, bounds.max_twist_angular),
-        ("max_linear_acceleration", limits.max_linear_acceleration, UNBOUNDED),
-        ("max_angular_acceleration", limits.max_angular_acceleration, UNBOUNDED),
-    ):
-        if value > valid:
-            raise InvalidArgumentError(
-                f"parameter {name} = {value:g} is absurd for this arm; valid: <= {valid:.4g} (twice what it can do)"
-            )
 
 
 def main(argv=None) -> int:

@@ -11,14 +11,9 @@ from manip_kin.motion.lines import TIME_SCALINGS
 from manip_kin.ros.nodes.collision_params import PATH_CHECK_PARAMETERS
 from manip_kin.ros.nodes.joint_limit_params import HELP_LINE
 from manip_kin.ros.nodes.robot_model import model_parameters
-from manip_kin.ros.runtime.params import (
-    REALTIME_PRIORITY,
-    SCHEDULER_SLICE,
-    ParamSpec,
-    diagnostics_rate,
-    loop_rate,
-    usage_text,
-)
+from manip_kin.ros.runtime.param_struct import param_struct
+from manip_kin.ros.runtime.params import REALTIME_PRIORITY, SCHEDULER_SLICE, ParamSpec, diagnostics_rate, loop_rate
+from manip_kin.ros.runtime.usage import usage_text
 
 NODE_NAME = "trajectory_generator"
 
@@ -47,7 +42,7 @@ PARAMETERS = (
         "('' = full for 6+ joints)",
     ),
     # Motion limits: from 0.1 mm/s (a 2 m line then takes 6 h) to 10 m/s and 100 m/s^2 (beyond any
-    # arm; the speeds are also capped at twice what this arm can do, see _check_limits); the
+    # arm; the speeds are also capped at twice what this arm can do, see trajectory_generator_params.check_limits); the
     # angular ones from 1e-4 rad/s to 100 rad/s and 1000 rad/s^2. The lower bounds keep durations finite.
     ParamSpec(
         "max_linear_velocity",
@@ -121,6 +116,11 @@ PARAMETERS = (
     *PATH_CHECK_PARAMETERS,
     REALTIME_PRIORITY,
     SCHEDULER_SLICE,
+)
+
+#: The parameters as a typed struct (what the node reads; the joint_limits.* group is in its ``dynamic``).
+GeneratorParams = param_struct(
+    "GeneratorParams", PARAMETERS, "trajectory_generator's parameters, typed (docs/interfaces.md)."
 )
 
 USAGE = usage_text(

@@ -1,5 +1,9 @@
 """Node parameters: one table per node gives the declaration, the checks and the ``--help`` text.
 
+This module is the table's row, :class:`ParamSpec`, and the rows every loop node shares;
+declaring them on a node and live changes: :mod:`manip_kin.ros.runtime.declared_params`; the
+``--help`` text: :mod:`manip_kin.ros.runtime.usage`.
+
 Parameters are declared with a :class:`~rcl_interfaces.msg.ParameterDescriptor`
 (description with units) and ``dynamic_typing`` so that ``-p rate_hz:=1000`` (an integer
 on the command line) and ``-p initial_positions:=[0, 0, 0]`` work where a float is meant;
@@ -8,22 +12,19 @@ error (exit 2 through ``run_node``).
 
 Live tuning: a ``tunable`` parameter (gains, damping, tolerances, timeouts, limits) can be
 set on the running node through the standard parameter services (``ros2 param set``,
-``rclpy.parameter_client.AsyncParameterClient``). :class:`LiveParameters` checks the new
-value with the same :meth:`ParamSpec.coerce` as at start and hands it to the node, which
-rebuilds its core object with it; an invalid value is refused with the reason in the
-``SetParametersResult``. The other parameters are structural (robot, links, rates, frames)
-and read-only: setting one is refused, and their description says so.
+``rclpy.parameter_client.AsyncParameterClient``): the new value is checked with the same
+:meth:`ParamSpec.coerce` as at start and handed to the node, which rebuilds its core object
+with it (:class:`~manip_kin.ros.runtime.declared_params.LiveParameters`); an invalid value is
+refused with the reason in the ``SetParametersResult``. The other parameters are structural
+(robot, links, rates, frames) and read-only: setting one is refused, and their description says so.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.node import Node
-from rclpy.parameter import Parameter
+from rcl_interfaces.msg import ParameterDescriptor
 
 from manip_kin.errors import InvalidArgumentError
 
@@ -85,7 +86,8 @@ class ParamSpec:
             ``minimum``..``maximum`` (a rate: 0 = off, a tiny one such as 1e-300 Hz is refused).
         choices: valid values for strings, or empty.
         default_text: how to show a None default (or a long list default) in ``--help``.
-        tunable: settable on the running node (see :class:`LiveParameters`); otherwise
+        tunable: settable on the running node (see
+            :class:`~manip_kin.ros.runtime.declared_params.LiveParameters`); otherwise
             structural and read-only.
 
     Every number parameter of the nodes has both bounds, chosen so that no value within
@@ -281,126 +283,3 @@ SCHEDULER_SLICE = ParamSpec(
     minimum=0.0,
     maximum=0.1,  # the kernel's own ceiling
 )
-
-
-def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, object]:
-    """Declare every parameter on ``node`` and return the checked values by name.
-
-    Raises:
-        InvalidArgumentError: a value of the wrong type or outside its range.
-    """
-    values: dict[str, object] = {}
-    for spec in specs:
-        if spec.default is None:
-            # No default: declared without a value; "not set" reads back as None.
-            parameter = node.declare_parameter(spec.name, None, spec.descriptor())
-        else:
-            parameter = node.declare_parameter(spec.name, spec.default, spec.descriptor())
-        value = parameter.value
-        if parameter.type_ == Parameter.Type.NOT_SET:
-            value = None
-        values[spec.name] = spec.coerce(value)
-    return values
-
-
-class LiveParameters:
-    """Run-time changes of a node's tunable parameters, checked as at start.
-
-    Registered as the node's on-set-parameters callback: every value of a set request is
-    coerced and checked by its :class:`ParamSpec`; when all pass, ``apply(updates)`` gets
-    the checked values by name and returns None (the node now uses them) or the reason it
-    cannot use them (the request is refused, nothing changes). Parameters not in ``specs``
-    (``use_sim_time``...) are left to rclpy.
-
-    Args:
-        node: the node.
-        specs: its parameter table.
-        apply: ``apply({name: value}) -> None | reason``; called in the executor thread.
-    """
-
-    def __init__(self, node: Node, specs: Sequence[ParamSpec], apply: Callable[[dict[str, object]], str | None]):
-        self._specs = {spec.name: spec for spec in specs}
-        self._apply = apply
-        self._logger = node.get_logger()
-        node.add_on_set_parameters_callback(self._on_set)
-
-    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
-        updates: dict[str, object] = {}
-        for parameter in parameters:
-            spec = self._specs.get(parameter.name)
-            if spec is None:
-                continue
-            if not spec.tunable:
-                return _refused(f"parameter {spec.name} is read-only: structural, set at start (restart the node)")
-            if parameter.type_ == Parameter.Type.NOT_SET:
-                return _refused(f"parameter {spec.name} cannot be unset; valid: {spec.constraint_text() or spec.kind}")
-            try:
-                updates[spec.name] = spec.coerce(parameter.value)
-            except InvalidArgumentError as error:
-                return _refused(str(error))
-        if not updates:
-            return SetParametersResult(successful=True)
-        try:
-            problem = self._apply(updates)
-        except Exception as error:  # noqa: BLE001 - an exception here would end the executor: refuse instead
-            self._logger.error(f"setting {', '.join(updates)} failed: {type(error).__name__}: {error}"[:MAX_REASON])
-            problem = f"the node could not use it: {type(error).__name__}: {error}"
-        if problem:
-            return _refused(problem)
-        self._logger.info(
-            "parameters set: " + ", ".join(f"{name} = {quoted(value)}" for name, value in updates.items())
-        )
-        return SetParametersResult(successful=True)
-
-
-#: Longest refusal reason [characters] (the reason of a SetParametersResult).
-MAX_REASON = 400
-
-
-def _refused(reason: str) -> SetParametersResult:
-    if len(reason) > MAX_REASON:
-        reason = reason[: MAX_REASON - 3] + "..."
-    return SetParametersResult(successful=False, reason=reason)
-
-
-def usage_text(
-    executable: str,
-    summary: str,
-    specs: Sequence[ParamSpec],
-    subscribes: Sequence[tuple[str, str, str]],
-    publishes: Sequence[tuple[str, str, str]],
-    example: str,
-    extra_help: str = "",
-    services: Sequence[tuple[str, str, str]] = (),
-) -> str:
-    """The ``--help`` text of a node executable.
-
-    Args:
-        executable: executable name.
-        summary: what the node does (a few lines).
-        specs: its parameters.
-        subscribes: ``(topic, type, note)`` per input topic.
-        publishes: ``(topic, type, note)`` per output topic.
-        example: example command line(s).
-        extra_help: lines for parameters declared once the model is known (after the table).
-        services: ``(name, type, note)`` per service.
-    """
-    lines = [f"usage: {executable} [--help] [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r FROM:=TO ...]", ""]
-    lines += [
-        summary.strip(),
-        "",
-        "Parameters (--ros-args -p NAME:=VALUE or --params-file FILE with /**: ros__parameters;",
-        "those marked 'Settable at run time' also with `ros2 param set` on the running node):",
-    ]
-    lines += [spec.help_line() for spec in specs]
-    if extra_help:
-        lines.append(extra_help)
-    lines += ["", "Subscribes:"]
-    lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in subscribes]
-    lines += ["", "Publishes:"]
-    lines += [f"  {topic} ({msg_type}){': ' + note if note else ''}" for topic, msg_type, note in publishes]
-    if services:
-        lines += ["", "Services:"]
-        lines += [f"  {name} ({srv_type}){': ' + note if note else ''}" for name, srv_type, note in services]
-    lines += ["", "Example:", f"  {example}"]
-    return "\n".join(lines)

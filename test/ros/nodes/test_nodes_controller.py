@@ -169,7 +169,7 @@ def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
     node, commands, _ = _start(harness)
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
     harness.publish("/goal_pose", make_pose_stamped(GOAL, "base_link"))
-    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    assert harness.spin_until(lambda: node.inputs.goal is not None, 3, every=stream)
     nan_goal = make_pose_stamped(GOAL, "base_link")
     nan_goal.pose.position.x = math.nan
     long_quat = make_pose_stamped(GOAL, "base_link")
@@ -181,7 +181,11 @@ def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
     harness.publish("/goal_twist", bad_twist)
     harness.publish("/joint_states", make_joint_state(MODEL.joint_names[:3], [0.0, 0.0, 0.0]))
     assert harness.spin_until(
-        lambda: node.rejected_goals == 3 and node.rejected_twists == 1 and node.rejected_joint_states == 1,
+        lambda: (
+            node.inputs.rejected_goals == 3
+            and node.inputs.rejected_twists == 1
+            and node.inputs.rejected_joint_states == 1
+        ),
         3,
         every=stream,
     )
@@ -223,7 +227,7 @@ def test_gains_frame_task_and_base_frame_parameters(harness, capfd):
     goal = make_transform(rpy_to_matrix(0.3, 0.0, 0.2) @ ee[:3, :3], ee[:3, 3] + [0.03, -0.02, 0.04])
     harness.publish("/goal_pose", make_pose_stamped(goal, "base_link"))  # not the base frame now
     harness.publish("/goal_pose", make_pose_stamped(goal, "world"))
-    assert harness.spin_until(lambda: node.goal is not None and node.rejected_goals == 1, 3, every=stream)
+    assert harness.spin_until(lambda: node.inputs.goal is not None and node.inputs.rejected_goals == 1, 3, every=stream)
     commands.clear()
     harness.spin_for(0.1, every=stream)
     expected = _expected(goal, frame="ee", rows=(3, 4, 5), gains=(0.3, 1.7))
@@ -271,7 +275,7 @@ def test_velocity_and_position_limit_switches(harness):
     raw = _expected(goal, q=q, gains=(20.0, 20.0), velocity_limits=False)
     assert raw[5] < 0 and np.max(np.abs(raw) / MODEL.velocity_limits) > 1.0  # both limits matter here
     harness.publish("/goal_pose", make_pose_stamped(goal, "base_link"))
-    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    assert harness.spin_until(lambda: node.inputs.goal is not None, 3, every=stream)
     commands.clear()
     harness.spin_for(0.1, every=stream)
     np.testing.assert_allclose(commands[-1].data, raw, rtol=1e-6, atol=1e-6)
@@ -306,7 +310,7 @@ def test_predict_state_and_command_latency_parameters(harness):
     node, commands, _ = _start(harness, command_latency=0.0, use_sim_time=True)
     harness.executor.add_node(node)  # its clock subscription runs in the executor
     harness.publish("/goal_pose", make_pose_stamped(GOAL, "base_link"))
-    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
+    assert harness.spin_until(lambda: node.inputs.goal is not None, 3, every=stream)
     # (state age [s], command_latency [s], predict_state): each row changes one thing.
     cases = [(0.0, 0.0, True), (0.0, 1.25 * period, True), (2.5 * period, 1.25 * period, True), (0.0, 0.0, False)]
     results = []
@@ -352,8 +356,8 @@ def test_quaternion_tolerance_parameter(harness):
     q = loose.pose.orientation
     q.x, q.y, q.z, q.w = (1.1 * v for v in (q.x, q.y, q.z, q.w))  # length 1.1: within 0.2, not 0.01
     harness.publish("/goal_pose", loose)
-    assert harness.spin_until(lambda: node.goal is not None, 3, every=stream)
-    assert node.rejected_goals == 0
+    assert harness.spin_until(lambda: node.inputs.goal is not None, 3, every=stream)
+    assert node.inputs.rejected_goals == 0
     commands.clear()
     harness.spin_for(0.1, every=stream)
     np.testing.assert_allclose(commands[-1].data, _expected(GOAL), atol=1e-6)  # used normalised

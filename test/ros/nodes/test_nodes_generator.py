@@ -49,7 +49,10 @@ def _start(harness, **params):
     # And the other way: the node's streams reach this test's subscriptions from the first goal
     # on (a line started before they match would lose its first goals).
     assert harness.spin_until(
-        lambda: node._goal_pub.get_subscription_count() > 0 and node._twist_pub.get_subscription_count() > 0, 5
+        lambda: (
+            node.stream._goal_pub.get_subscription_count() > 0 and node.stream._twist_pub.get_subscription_count() > 0
+        ),
+        5,
     )
     return node, goals, twists, paths, diagnostics
 

@@ -106,7 +106,9 @@ def test_controller_rejects_absurd_goals_twists_and_joint_states(harness, capfd)
         harness.publish("/goal_pose", msg)
     huge = make_twist_stamped([0.0, 0.0, 1e6], [1e300, 0.0, 0.0], "base_link")
     harness.publish("/goal_twist", huge)
-    assert harness.spin_until(lambda: node.rejected_goals == 2 and node.rejected_twists == 1, 5, every=stream)
+    assert harness.spin_until(
+        lambda: node.inputs.rejected_goals == 2 and node.inputs.rejected_twists == 1, 5, every=stream
+    )
     # Joint states: duplicated names, empty, absurd finite positions (each sent for a while).
     bad_states = [
         make_joint_state([model.joint_names[0]] * 7, q0),
@@ -115,15 +117,15 @@ def test_controller_rejects_absurd_goals_twists_and_joint_states(harness, capfd)
     ]
     for bad in bad_states:
         state["msg"] = bad
-        before = node.rejected_joint_states
-        assert harness.spin_until(lambda before=before: node.rejected_joint_states > before, 5, every=stream)
+        before = node.inputs.rejected_joint_states
+        assert harness.spin_until(lambda before=before: node.inputs.rejected_joint_states > before, 5, every=stream)
     # The counter rises before the node's log line is written: read once the loop has moved on.
     # (the empty one is a name problem like the duplicates: same kind, so its line is held back)
     expected = ("more than once; valid: each joint once", "out of range; valid: [", "too fast; valid: at most")
     logged = harness.logged(node, capfd, every=stream)
     assert all(line in logged for line in expected), logged
     # The previous good goal is kept; commands stayed finite and within the velocity limits.
-    np.testing.assert_allclose(node.goal, good, atol=1e-12)
+    np.testing.assert_allclose(node.inputs.goal, good, atol=1e-12)
     data = np.array([c.data for c in commands])
     assert np.all(np.isfinite(data)) and np.all(np.abs(data) <= model.velocity_limits * (1 + 1e-9))
     # The stale joint state (only bad ones since) leads to zeros; a good one resumes tracking.

@@ -256,7 +256,7 @@ def test_controller_follows_a_joint_reference_then_a_pose_goal(harness, capfd):
     not_finite = make_joint_state(NAMES, [0.1, math.nan, 0.1, 0.1], stamp=_now(harness))
     for msg in (outside, missing, not_finite):
         harness.publish("joint_reference", msg)
-    assert harness.spin_until(lambda: node.rejected_references == 3, 3)
+    assert harness.spin_until(lambda: node.inputs.rejected_references == 3, 3)
     logged = harness.logged(node, capfd)  # the loop thread logs right after counting
     assert all(f in logged for f in ("outside its limits", "lacks joints", "NaN or infinity")), logged
     # A pose goal after the reference wins: the cartesian law's command.

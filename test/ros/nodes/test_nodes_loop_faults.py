@@ -111,7 +111,7 @@ def test_robot_state_step_raising_holds_position(harness):
         harness.publish("/joint_velocity_commands", Float64MultiArray(data=rates.tolist()))
 
     assert harness.spin_until(lambda: states and any(states[-1].velocity), 5, every=command)
-    node.integrator.step = _raise
+    node.plant.step = _raise
     _assert_error_reported(harness, diagnostics, "robot_state")
     _assert_keeps_cycling(harness, node)
     count = len(states)
@@ -123,7 +123,7 @@ def test_robot_state_step_raising_holds_position(harness):
         np.testing.assert_array_equal(np.array(msg.position), first)
         assert not any(msg.velocity)
 
-    del node.integrator.step  # back to the class's method
+    del node.plant.step  # back to the class's method
     assert harness.spin_until(lambda: np.any(np.array(states[-1].position) != first), 5, every=command)
 
 

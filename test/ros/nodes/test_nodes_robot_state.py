@@ -194,7 +194,7 @@ def test_bad_parameters_stop_the_node(harness):
     node = harness.start(
         RobotStateNode, robot="irb120", initial_positions=[0, 1, 0, 0, 0, 0], rate_hz=100
     )  # integers accepted
-    np.testing.assert_allclose(node.integrator.q, [0, 1, 0, 0, 0, 0])
+    np.testing.assert_allclose(node.plant.q, [0, 1, 0, 0, 0, 0])
 
 
 def _numeric_twist(model, q, qdot, frame, step=1e-6):
@@ -295,11 +295,11 @@ def test_diagnostics_rate_zero_turns_them_off(harness):
 def test_joint_integrator_steps():
     """q ← q + q̇·dt, the whole vector scaled into the velocity limits, clamped at position
     limits with the velocity of the clamped step reported (exact, no ROS, no clock)."""
-    from manip_kin.ros.nodes.robot_state import JointIntegrator
+    from manip_kin.plant import KinematicPlant
 
     model = load_robot("genova7")
     q0 = model.start_configuration()
-    integrator = JointIntegrator(model, q0)
+    integrator = KinematicPlant(model, q0)
     command = np.array([0.2, -0.1, 0.3, 0.0, 0.1, 0.05, -0.4])
     for dt in (0.002, 0.004, 0.0013):
         before = np.array(integrator.q_values)

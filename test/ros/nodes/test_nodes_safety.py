@@ -135,8 +135,8 @@ def test_a_goal_rejected_for_its_frame_is_reported_with_the_reason(harness):
     model, hardware, node, diagnostics = start_held_arm(harness, "genova7", load_robot("genova7").start_configuration())
     try:
         stamp = send_goal(harness, node, make_transform(rpy_to_matrix(0, 0, 0), [0.3, 0.0, 0.4]), frame="world")
-        assert harness.spin_until(lambda: node.rejected_stamp == stamp, 3)
-        assert "'world'" in node.last_rejection and "base_link" in node.last_rejection
+        assert harness.spin_until(lambda: node.inputs.rejected_stamp == stamp, 3)
+        assert "'world'" in node.inputs.last_rejection and "base_link" in node.inputs.last_rejection
 
         def reported():
             for s in statuses(diagnostics, node.status_name):

@@ -97,7 +97,7 @@ def test_markers_show_the_goal_and_path_that_were_sent(harness):
     spheres = [latest[("joint_limits", i)] for i in range(7)]
     assert [m.header.frame_id for m in spheres] == [f"link{i}" for i in range(1, 8)]
     model = node.model
-    expected = markers.limit_colours(node.integrator.q, model.lower, model.upper)
+    expected = markers.limit_colours(node.plant.q, model.lower, model.upper)
     got = np.array([[m.color.r, m.color.g, m.color.b, m.color.a] for m in spheres])
     np.testing.assert_allclose(got, expected, atol=1e-6)  # float32 colour channels
     np.testing.assert_allclose(got[1], markers.LIMIT_COLOUR, atol=1e-6)  # joint2 on its limit: red

@@ -25,12 +25,12 @@ from manip_kin.ros.nodes import (
     cartesian_controller_interface,
     live_view,
     recorder_config,
-    robot_state,
+    robot_state_interface,
     trajectory_generator_interface,
 )
 from manip_kin.ros.runtime.params import QUOTE_LENGTH, ParamSpec, period_ns
 
-LOOP_NODES = (robot_state, cartesian_controller_interface, trajectory_generator_interface)
+LOOP_NODES = (robot_state_interface, cartesian_controller_interface, trajectory_generator_interface)
 TABLES = {
     module.NODE_NAME: {spec.name: spec for spec in module.PARAMETERS}
     for module in (*LOOP_NODES, recorder_config, live_view)

@@ -167,7 +167,7 @@ def test_joint_states_of_another_arm_bring_the_commands_to_rest(harness, publish
     arm.update(names=RPP.joint_names, q=np.zeros(RPP.dof))
     assert harness.spin_until(lambda: node.state == "stale input", 5, every=stream)
     assert harness.spin_until(lambda: commands and not np.any(commands[-1].data), 5, every=stream)
-    assert node.rejected_joint_states > 0
+    assert node.inputs.rejected_joint_states > 0
 
 
 def test_without_publisher_gids_different_urdfs_are_still_refused(harness, publishers, monkeypatch):

@@ -33,7 +33,7 @@ from manip_kin.core.robots import load_robot
 from manip_kin.errors import ManipKinError
 from manip_kin.ik.iterative import solve_ik
 from manip_kin.motion.lines import TIME_SCALINGS, LineTrajectory, MotionLimits, make_time_scaling
-from manip_kin.ros.nodes.robot_state import JointIntegrator
+from manip_kin.plant import KinematicPlant
 from manip_kin.ros.wire.cdr import JointStateDecoder, decode_float64_array
 from manip_kin.ros.wire.messages import make_joint_state, pose_stamped_to_matrix, pose_to_matrix, twist_to_arrays
 from manip_kin.ros.wire.validation import (
@@ -208,7 +208,7 @@ def test_command_handler_and_integrator(values, dt, steps):
     if problem is not None:
         assert "valid" in problem
         return
-    integrator = JointIntegrator(MODEL, Q0)
+    integrator = KinematicPlant(MODEL, Q0)
     for _ in range(steps + 1):
         integrator.step(command, dt)
         assert MODEL.within_limits(integrator.q)
