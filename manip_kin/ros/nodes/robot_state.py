@@ -28,6 +28,7 @@ from manip_kin.core.robots import resolve_robot_path
 from manip_kin.core.scene import Scene
 from manip_kin.core.urdf import model_to_urdf, with_chain_hint
 from manip_kin.errors import InvalidArgumentError, JointCountError
+from manip_kin.plant.held_commands import HeldCommand, held_segments
 from manip_kin.ros.nodes.physics_params import make_plant
 from manip_kin.ros.nodes.robot_model import load_node_model
 from manip_kin.ros.nodes.robot_state_interface import NODE_NAME, USAGE, RobotStateParams
@@ -65,6 +66,10 @@ def initial_positions(model: RobotModel, values) -> np.ndarray:
     return q
 
 
+#: Commands kept between two cycles: a stall this many periods long replays all it missed.
+COMMAND_DEPTH = 200
+
+
 class RobotStateNode(LoopingNode):
     """ROS handles around one plant (:mod:`manip_kin.plant`)."""
 
@@ -84,7 +89,10 @@ class RobotStateNode(LoopingNode):
         LiveParameters(self, params, self._set_parameters)
 
         self._max_command = InputBounds.of(self.model).max_command
-        self._command_sub = PolledSubscription(self, Float64MultiArray, "joint_velocity_commands", latest_state_qos(10))
+        # Deep enough to replay a stall's commands at their own cycles (see plant.held_commands).
+        self._command_sub = PolledSubscription(
+            self, Float64MultiArray, "joint_velocity_commands", latest_state_qos(COMMAND_DEPTH), timed=True
+        )
         self._joint_state_pub = self.create_publisher(JointState, "joint_states", STREAM_DEPTH)
         self._ee_pose_pub = self.create_publisher(PoseStamped, "ee_pose", STREAM_DEPTH)
         self._tool_pose_pub = self.create_publisher(PoseStamped, "tool_pose", STREAM_DEPTH)
@@ -101,8 +109,8 @@ class RobotStateNode(LoopingNode):
         self._pose_cdr = PoseStampedCdr(self.base_frame)
         self._twist_cdr = TwistStampedCdr(self.base_frame)
 
-        self._command: np.ndarray | None = None
-        self._command_time_ns = 0
+        self._held: HeldCommand | None = None
+        self._period_ns = period_ns(self.rate_hz)
         self._last_cycle_ns = 0
         self._last_diagnostics_ns = 0
         self.rejected_commands = 0
@@ -153,10 +161,13 @@ class RobotStateNode(LoopingNode):
             text = with_chain_hint(text, tip, params.tool_link or None)
         return text
 
-    def _take_commands(self, now_ns: int) -> None:
-        dof = self.model.dof
-        while (data := self._command_sub.take(raw=True)) is not None:
-            values = decode_float64_array(data)
+    def _take_commands(self, now_ns: int) -> list[tuple[int, np.ndarray]]:
+        """The valid commands queued since the last cycle, oldest first, each with the loop time
+        it was sent at (from the middleware's source timestamp; now where there is none)."""
+        dof, arrived = self.model.dof, []
+        system_to_loop = time.monotonic_ns() - time.time_ns()
+        while (taken := self._command_sub.take_timed(raw=True)) is not None:
+            values = decode_float64_array(taken[0])
             problem = command_problem(values, dof, max_abs=self._max_command)
             if problem is not None:
                 self.rejected_commands += 1
@@ -165,12 +176,12 @@ class RobotStateNode(LoopingNode):
                     f"rejected {self._command_sub.subscription.topic_name}: {problem}; keeping the previous command",
                 )
                 continue
-            self._command = values
-            self._command_time_ns = now_ns
+            arrived.append((taken[1] + system_to_loop if taken[1] else now_ns, values))
+        return arrived
 
     def publish_safe_output(self) -> None:
         """After a failed cycle: hold position (drop the command; the state again, at zero velocity)."""
-        self._command = None
+        self._held = None
         plant = self.plant
         stamp_ns = self.ros_time_ns()
         zeros = [0.0] * self.model.dof
@@ -179,23 +190,19 @@ class RobotStateNode(LoopingNode):
         )
 
     def _cycle(self, now_ns: int) -> None:
-        self._take_commands(now_ns)
-        # Through a stall of this process the arm moves on with the command it holds, as a real
-        # arm does while the computer reading it hiccups, until the command times out (a stall
-        # stopping it instead: at 0.4 m/s, 12 ms cost a line 3.6 mm that the controller then
-        # caught up through its jerk limits, 0.26 mm beside the line). At most command_timeout.
+        arrived = self._take_commands(now_ns)
+        # Through a stall of this process the arm moves as hardware taking each command at its
+        # own cycle would: the stall's queued commands replayed on the loop's schedule, each
+        # until it times out (plant.held_commands).
         last_ns, self._last_cycle_ns = self._last_cycle_ns, now_ns
-        dt = min(now_ns - last_ns, self.command_timeout_ns) * 1e-9 if last_ns else 0.0
-        command, held = self._command, 0.0
-        if command is not None:
-            held = min(dt, max(self._command_time_ns + self.command_timeout_ns - last_ns, 0) * 1e-9)
+        segments, self._held = held_segments(
+            last_ns or now_ns, now_ns, self._period_ns, self._held, arrived, self.command_timeout_ns
+        )
         plant = self.plant
         if self._with_effort:
             self._take_scene()
-        if held > 0.0:
-            plant.step(command, held)
-        if held < dt or held == 0.0:
-            plant.step(None, dt - held)  # no command (or it timed out on the way): at rest
+        for segment in segments:
+            plant.step(segment.values, segment.seconds)
         if self._with_effort:
             self._note_contact(plant.take_contact())
 
@@ -214,7 +221,7 @@ class RobotStateNode(LoopingNode):
 
         if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
             self._last_diagnostics_ns = now_ns
-            self._publish_diagnostics(ns_to_stamp(stamp_ns), now_ns, command is not None)
+            self._publish_diagnostics(ns_to_stamp(stamp_ns), now_ns)
 
     def _take_scene(self) -> None:
         """Apply new collision_objects arrays; the plant rebuilds its scene when it changed."""
@@ -256,17 +263,17 @@ class RobotStateNode(LoopingNode):
             ("efforts", ",".join(f"{e:.3f}" for e in self.plant.effort_values)),
         ], pair
 
-    def _publish_diagnostics(self, stamp, now_ns: int, command_fresh: bool) -> None:
-        plant = self.plant
-        if self._command is None:
+    def _publish_diagnostics(self, stamp, now_ns: int) -> None:
+        plant, held = self.plant, self._held
+        if held is None:
             command_state = "none yet"
         else:
-            command_state = "fresh" if command_fresh else "stale (counted as zero)"
+            command_state = "fresh" if now_ns - held.taken_ns <= self.command_timeout_ns else "stale (counted as zero)"
         limited = [self.model.joint_names[i] for i in np.flatnonzero(plant.at_limit)]
         values = [
             ("robot", self.model.name),
             ("command", command_state),
-            ("command_age_s", f"{(now_ns - self._command_time_ns) * 1e-9:.4f}" if self._command is not None else "inf"),
+            ("command_age_s", f"{(now_ns - held.taken_ns) * 1e-9:.4f}" if held is not None else "inf"),
             ("rejected_commands", str(self.rejected_commands)),
             ("joints_at_limit", ",".join(limited)),
             ("velocity_scale", f"{plant.velocity_scale:.4f}"),

@@ -101,10 +101,20 @@ class PolledSubscription:
         topic: topic name (remappable like any other).
         qos: QoS profile or depth.
         public: force the public-API path (default: the fast path when available).
+        timed: keep each message's source timestamp for :meth:`take_timed`.
     """
 
-    def __init__(self, node: Node, msg_type, topic: str, qos: QoSProfile | int = 10, public: bool | None = None):
+    def __init__(
+        self,
+        node: Node,
+        msg_type,
+        topic: str,
+        qos: QoSProfile | int = 10,
+        public: bool | None = None,
+        timed: bool = False,
+    ):
         self._msg_type = msg_type
+        self.timed = timed
         self.fast = not public and not fast_path_problem()
         self.wake_event: threading.Event | None = None  # set on arrival (public path), see LoopWaiter
         if self.fast:
@@ -115,7 +125,8 @@ class PolledSubscription:
         else:
             depth = qos.depth if isinstance(qos, QoSProfile) else int(qos)
             self._queue: collections.deque | None = collections.deque(maxlen=max(1, depth))
-            self._subscription = node.create_subscription(msg_type, topic, self._store, qos, raw=True)
+            store = self._store_timed if timed else self._store
+            self._subscription = node.create_subscription(msg_type, topic, store, qos, raw=True)
 
     @property
     def subscription(self):
@@ -128,8 +139,28 @@ class PolledSubscription:
         if event is not None:
             event.set()
 
+    def _store_timed(self, data: bytes, info: Any) -> None:
+        self._store((data, _source_timestamp(info)))
+
+    def take_timed(self, raw: bool = False) -> tuple[Any, int] | None:
+        """As :meth:`take`, with the time the writer sent the message: its middleware source
+        timestamp [ns, system clock], 0 where the middleware gives none. Needs ``timed``."""
+        if self._queue is not None:
+            try:
+                data, sent_ns = self._queue.popleft()
+            except IndexError:
+                return None
+            return (data if raw else deserialize_message(data, self._msg_type)), sent_ns
+        handle = self._subscription.handle
+        with handle:
+            taken = handle.take_message(self._msg_type, raw)
+        return None if taken is None else (taken[0], _source_timestamp(taken[1]))
+
     def take(self, raw: bool = False):
         """The oldest unread message (its CDR ``bytes`` with ``raw``), or None. Never blocks."""
+        if self.timed:
+            taken = self.take_timed(raw)
+            return None if taken is None else taken[0]
         if self._queue is not None:
             try:
                 data = self._queue.popleft()
@@ -207,6 +238,14 @@ def sleep_ns(timeout_ns: int) -> bool:
     if timeout_ns > 0:
         time.sleep(timeout_ns * 1e-9)
     return False
+
+
+def _source_timestamp(info: Any) -> int:
+    """The writer's send time in rclpy's MessageInfo [ns], 0 where there is none."""
+    try:
+        return int(info["source_timestamp"])
+    except (KeyError, TypeError, ValueError):
+        return 0
 
 
 def _info_dict(info: Any) -> dict:

@@ -336,10 +336,12 @@ def test_a_stall_moves_the_arm_on_its_held_command_stamped_at_the_cycle_start(ha
     assert harness.spin_until(lambda: len(joint_states) > 5, 5)  # the states reach the test
     node.loop.stop()  # the test runs the cycles, at the times it chooses
     assert not node.loop.running
+    base_ns = time.monotonic_ns()
+    node._cycle(base_ns)  # the cycle before the command
     command = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
     harness.publish("/joint_velocity_commands", array_to_multiarray(command))
     time.sleep(0.05)  # delivered to the node's reader (its cycles take it from there)
-    start_ns = time.monotonic_ns()
+    start_ns = base_ns + 4_000_000  # the next cycle on schedule takes it
     node._cycle(start_ns)
     before = np.array(node.plant.q_values)
     stall = 0.040  # ten periods at 250 Hz
@@ -362,3 +364,38 @@ def test_a_stall_moves_the_arm_on_its_held_command_stamped_at_the_cycle_start(ha
     moved = np.array(node.plant.q_values) - before
     np.testing.assert_allclose(moved, command * 0.5, rtol=1e-9, atol=1e-12)
     assert not any(node.plant.qdot_values)
+
+
+def test_a_stall_replays_the_commands_sent_during_it_at_their_own_cycles(harness):
+    """Commands queued while robot_state's loop was late each drive the period their own cycle
+    would have driven, as hardware taking them in its own cycles does (the newest alone over
+    the whole stall put a 0.4 m/s line 0.5 mm beside itself)."""
+    node = harness.start(RobotStateNode, robot="irb120", rate_hz=50.0, command_timeout=0.1)
+    harness.wait_matched("/joint_velocity_commands", Float64MultiArray)
+    node.loop.stop()
+    period = 20_000_000
+    base_ns = time.monotonic_ns()
+    node._cycle(base_ns)
+    before = np.array(node.plant.q_values)
+    first = np.array([0.2, 0.1, -0.1, 0.0, 0.3, 0.0])
+    second = np.array([-0.1, 0.0, 0.2, 0.1, 0.0, -0.2])
+
+    def publish_at(offset_ns, command):
+        while time.monotonic_ns() < base_ns + offset_ns:
+            time.sleep(0.0005)
+        sent = time.monotonic_ns() - base_ns
+        harness.publish("/joint_velocity_commands", array_to_multiarray(command))
+        return sent
+
+    # Sent 1.5 and 3.5 periods into the stall: the cycles at 2 and 4 periods would take them.
+    sent = [publish_at(3 * period // 2, first), publish_at(7 * period // 2, second)]
+    assert period < sent[0] < 2 * period and 3 * period < sent[1] < 4 * period, sent  # else the timing is off
+    time.sleep(0.05)  # both delivered
+    node._cycle(base_ns + 11 * period // 2)  # 5.5 periods after the last cycle
+    moved = np.array(node.plant.q_values) - before
+    # Nothing over the first period; the cycle at 2 periods takes the first command, which drives
+    # the second period and is held through the third; the cycle at 4 takes the second, which
+    # drives the fourth, and the cycle now drives from 4 periods to now with it (the newest
+    # alone over the whole stall was the old rule: second * 5.5 periods).
+    expected = first * 2 * period * 1e-9 + second * 2.5 * period * 1e-9
+    np.testing.assert_allclose(moved, expected, rtol=1e-9, atol=1e-12)
