@@ -281,7 +281,7 @@ def test_joint_reference_reader_kind(data):
 
 def _servo() -> ServoInputs:
     servo = ServoInputs.__new__(ServoInputs)  # the checks only: no node, no subscriptions
-    servo.node = SimpleNamespace(bounds=BOUNDS, base_frame=MODEL.base_frame)
+    servo.node = SimpleNamespace(inputs=SimpleNamespace(bounds=BOUNDS), base_frame=MODEL.base_frame)
     servo.configure(MODEL, SingularityScaling())
     return servo
 
