@@ -38,7 +38,11 @@ TARGETS: dict[str, tuple[str, ...]] = {
     "manip_kin/core/kinematics.py": ("test/core/test_kinematics.py",),
     "manip_kin/core/rotations.py": ("test/core/test_rotations.py", "test/core/test_mutation_survivors.py"),
     "manip_kin/codegen/chain.py": ("test/core/test_kinematics.py", "test/codegen/test_ir.py"),
-    "manip_kin/codegen/ir.py": ("test/codegen/test_ir.py", "test/core/test_kinematics.py"),
+    "manip_kin/codegen/ir.py": (
+        "test/codegen/test_ir.py",
+        "test/core/test_kinematics.py",
+        "test/control/test_control.py",
+    ),
     "manip_kin/codegen/inlined.py": ("test/core/test_rotations.py", "test/control/test_control.py"),
     "manip_kin/codegen/pose_error.py": ("test/control/test_control.py", "test/ik/test_ik.py"),
     "manip_kin/codegen/unrolled_linalg.py": ("test/control/test_control.py",),
