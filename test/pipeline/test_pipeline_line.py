@@ -75,7 +75,7 @@ def test_irb120_line_tracked_along_the_segment(irb120):
     assert first.returncode == 0, first.stderr
     client = irb120.client()
     samples = []
-    client.node.create_subscription(
+    subscription = client.node.create_subscription(
         PoseStamped,
         "/tool_pose",
         lambda m: samples.append(pose_stamped_to_matrix(m)),
@@ -84,6 +84,15 @@ def test_irb120_line_tracked_along_the_segment(irb120):
         # lost the line's start.
         20000,
     )
+    try:
+        _check_the_line(irb120, client, samples, start, end)
+    finally:
+        # Left on the shared client, its queue filled while later tests ran their CLI, and
+        # draining thousands of poses held off the next test's fresh tool_pose past 5 s.
+        client.node.destroy_subscription(subscription)
+
+
+def _check_the_line(irb120, client, samples, start, end):
     # The subscription is matched before the line starts: a sample arrives.
     assert client.spin_until(lambda: samples, 10), "no /tool_pose"
     samples.clear()
