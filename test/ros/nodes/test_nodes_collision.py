@@ -8,6 +8,7 @@ objects for the Panda's hand and link 1; over every position the fake arm integr
 import math
 import os
 import re
+import time
 
 import numpy as np
 import pytest
@@ -297,3 +298,33 @@ def test_the_generator_refuses_a_line_and_a_joint_trajectory_through_a_box(harne
         assert harness.spin_until(lambda: node.state == "streaming", 5), node.last_rejection
     finally:
         hardware.close()
+
+
+def test_collision_objects_are_polled_every_scene_poll_period_not_every_cycle():
+    """An empty poll costs a 1 kHz loop more than the scene's changes are worth: the loop takes
+    collision_objects every SCENE_POLL_NS, and then every queued array."""
+    from types import SimpleNamespace
+
+    from manip_kin.ros.nodes import scene_input
+
+    class Queue:
+        def __init__(self):
+            self.polls, self.queued = 0, []
+
+        def take(self):
+            self.polls += 1
+            return self.queued.pop(0) if self.queued else None
+
+    taker = scene_input.SceneInput.__new__(scene_input.SceneInput)  # no node: the polling only
+    taker.subscription, taker._next_poll_ns, taker.refused = Queue(), 0, 0
+    taker.checker = SimpleNamespace(update_scene=lambda scene: False, scene_problems=())
+    taker.scene = None
+    start = time.monotonic_ns()
+    for _ in range(200):
+        taker.take()
+    elapsed = time.monotonic_ns() - start
+    assert elapsed < scene_input.SCENE_POLL_NS  # else the machine was too slow to tell
+    assert taker.subscription.polls == 1  # one empty poll in 200 cycles within a period
+    time.sleep(scene_input.SCENE_POLL_NS * 1e-9)
+    taker.take()
+    assert taker.subscription.polls == 2
