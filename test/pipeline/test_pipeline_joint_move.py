@@ -8,6 +8,7 @@ import json
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,16 @@ def _run_recording(pipeline, args, topics=("joint_states", "joint_reference"), t
         )
         client.spin_until(lambda: process.poll() is not None, timeout)
         stdout, stderr = process.communicate(timeout=5)
-        client.spin_for(0.2)
+        # Drain what is queued: the client takes one message a spin, and under load a backlog of
+        # both streams outlasts a fixed wait (the last reference taken was then mid-move). The
+        # move's stream has ended once its count stays put (joint_states never ends).
+        streams = [recorded[topic] for topic in topics if topic != "joint_states"]
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            counts = [len(messages) for messages in streams]
+            client.spin_for(0.3)
+            if counts == [len(messages) for messages in streams]:
+                break
     finally:
         for subscription in subscriptions:
             client.node.destroy_subscription(subscription)
