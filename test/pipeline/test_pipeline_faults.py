@@ -102,6 +102,12 @@ def test_a_goal_lost_on_the_way_is_sent_again(tmp_path, topic):
     processes = pipeline_processes("genova7", rate_hz=200.0, controller=QUICK_GAINS)
     with Pipeline(processes, env=fresh_domain_env(), log_dir=tmp_path) as pipeline:
         client = pipeline.client()
+        # A line starts from the generator's newest joint state: wait until it has a current one
+        # (under load its reader matched robot_state's writer after the target came, once).
+        generator = client.status_name("trajectory_generator")
+        assert client.spin_until(
+            lambda: (s := client.latest_status(generator)) and float(s.values["joint_state_age_s"]) < 0.2, 30
+        ), client.latest_status(generator)
         publisher = client.publisher(PoseStamped, topic, latched=True)  # the one send_goal uses
         publish, published_at = publisher.publish, []
 

@@ -22,6 +22,7 @@ position-only task keeps the start orientation and checks the position only.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
@@ -211,16 +212,21 @@ class TrajectoryGeneratorNode(LoopingNode):
             f"rejected {topic.subscription.topic_name}: {reason}; {kept}",
         )
 
-    def _current_positions(self, msg: PoseStamped | JointTrajectory) -> np.ndarray | None:
-        """The newest joint positions (model order); None (and ``msg`` rejected) when there is no
-        usable joint state younger than ``joint_state_timeout``."""
+    def _newest_joint_state(self) -> tuple[JointState | None, float]:
+        """The newest joint state taken so far, and its age by its stamp [ns] (inf: none yet)."""
         while (state := self._joint_state_sub.take()) is not None:
             self._joint_state_msg = state
         state = self._joint_state_msg
+        if state is None:
+            return None, math.inf
+        return state, self.get_clock().now().nanoseconds - stamp_to_ns(state.header.stamp)
+
+    def _current_positions(self, msg: PoseStamped | JointTrajectory) -> np.ndarray | None:
+        """The newest joint positions (model order); None (and ``msg`` rejected) when there is no
+        usable joint state younger than ``joint_state_timeout``."""
+        state, age_ns = self._newest_joint_state()
         topic = self._joint_state_sub.subscription.topic_name
-        if state is None or (
-            self.get_clock().now().nanoseconds - stamp_to_ns(state.header.stamp) > self._joint_state_timeout_ns
-        ):
+        if state is None or age_ns > self._joint_state_timeout_ns:
             self._reject(msg, f"no current {topic} (is robot_state or the robot's driver running?)")
             return None
         try:
@@ -351,9 +357,13 @@ class TrajectoryGeneratorNode(LoopingNode):
     def _publish_diagnostics(self) -> None:
         supervisor = self.supervisor
         motion = supervisor.motion
+        age_ns = self._newest_joint_state()[1]
         values = [
             ("state", supervisor.state),
             ("detail", supervisor.detail),
+            # How old the state a target would start from is now (a target finds none older
+            # than joint_state_timeout usable): "inf" before the first joint_states.
+            ("joint_state_age_s", f"{age_ns * 1e-9:.3f}" if math.isfinite(age_ns) else "inf"),
             ("target_stamp", supervisor.target_stamp),
             ("final_goal_stamp", supervisor.final_goal_stamp),
             # When the motion's first sample went out (ROS clock); its last one is final_goal_stamp.
