@@ -71,24 +71,25 @@ def held_segments(
     # The missed cycles: last + k·period for k = 1..missed; the cycle now takes the last
     # period, one to two periods long (a loop less than a period late missed none).
     missed = max((now_ns - last_ns) // period_ns - 1, 0)
-    cursor, index, sent = last_ns, 0, last_ns
+    sends, sent = [], last_ns
+    for sent_ns, _ in arrived:
+        sent = min(max(sent_ns, sent, last_ns), now_ns)
+        sends.append(sent)
+    cursor, index = last_ns, 0
     while index < len(arrived):
-        sent = min(max(arrived[index][0], sent, last_ns), now_ns)
         # The cycle that takes it (the first after it was sent), and the one before: the
         # command drives the period between them.
-        cycle = max(-(-(sent - last_ns) // period_ns), 1)
+        cycle = max(-(-(sends[index] - last_ns) // period_ns), 1)
         if cycle <= missed:
             taking = last_ns + cycle * period_ns
             before = taking - period_ns
         else:
             taking, before = now_ns, last_ns + missed * period_ns
         _hold(segments, held, cursor, max(before, cursor), timeout_ns)
-        held = HeldCommand(arrived[index][1], taking)
-        index += 1
-        while index < len(arrived) and min(max(arrived[index][0], sent, last_ns), now_ns) <= taking:
-            sent = min(max(arrived[index][0], sent, last_ns), now_ns)
-            held = HeldCommand(arrived[index][1], taking)
+        # That cycle takes every command sent by then; the newest drives the period.
+        while index < len(arrived) and sends[index] <= taking:
             index += 1
+        held = HeldCommand(arrived[index - 1][1], taking)
         _hold(segments, held, max(before, cursor), taking, timeout_ns)
         cursor = taking
     _hold(segments, held, cursor, now_ns, timeout_ns)

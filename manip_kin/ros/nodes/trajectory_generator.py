@@ -83,8 +83,9 @@ class TrajectoryGeneratorNode(LoopingNode):
 
         self._target_sub = PolledSubscription(self, PoseStamped, "line_target", 10)
         self._trajectory_sub = PolledSubscription(self, JointTrajectory, "joint_trajectory", 10)
-        # Depth 1 and read only when a target comes: the newest state is all a plan needs, and
-        # not turning 1 kHz of state messages into Python objects keeps this loop cheap.
+        # Depth 1 and read only when a target comes or a status is due: the newest state is all
+        # a plan (and its age in the status) needs, and not turning 1 kHz of state messages into
+        # Python objects keeps this loop cheap.
         self._joint_state_sub = PolledSubscription(self, JointState, "joint_states", latest_state_qos(1))
         self.stream = MotionStream(self, self.base_frame, self.model.joint_names)
         # The service only sets the flag; the loop stops the motion (one writer of the state).

@@ -151,10 +151,14 @@ class PolledSubscription:
             except IndexError:
                 return None
             return (data if raw else deserialize_message(data, self._msg_type)), sent_ns
+        taken = self._take_message(raw)
+        return None if taken is None else (taken[0], _source_timestamp(taken[1]))
+
+    def _take_message(self, raw: bool):
+        """The fast path's take: ``(message, info)`` or None."""
         handle = self._subscription.handle
         with handle:
-            taken = handle.take_message(self._msg_type, raw)
-        return None if taken is None else (taken[0], _source_timestamp(taken[1]))
+            return handle.take_message(self._msg_type, raw)
 
     def take(self, raw: bool = False):
         """The oldest unread message (its CDR ``bytes`` with ``raw``), or None. Never blocks."""
@@ -167,9 +171,7 @@ class PolledSubscription:
             except IndexError:
                 return None
             return data if raw else deserialize_message(data, self._msg_type)
-        handle = self._subscription.handle
-        with handle:
-            taken = handle.take_message(self._msg_type, raw)
+        taken = self._take_message(raw)
         return None if taken is None else taken[0]
 
 
