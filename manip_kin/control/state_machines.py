@@ -129,6 +129,10 @@ class ProgressMonitor:
     components already within tolerance not counted) is a stall. Exponential convergence at
     gain K falls by ``1 - exp(-K T)`` a window (33 % at K = 0.8 1/s, T = 0.5 s), so a stall is
     not slow progress.
+
+    It also keeps the joints limited at every step of the window (:attr:`limited_throughout`,
+    of the window that ended last): a joint on its limit stays limited, while a singular arm's
+    rates swing wide enough to hold a joint for a cycle far from its limit (seen: 0.6 rad).
     """
 
     def __init__(self, window_ns: int):
@@ -139,19 +143,26 @@ class ProgressMonitor:
         """Forget the history (a new goal, a moving goal, a resumed motion)."""
         self._start_ns: int | None = None
         self._start_errors = (0.0, 0.0)
+        self._limited: set[int] = set()
+        self.limited_throughout: tuple[int, ...] = ()
 
-    def stalled(self, now_ns: int, errors: tuple[float, float], tolerances: tuple[float, float]) -> bool:
-        """True when the window that ends now made no progress (then a new window starts)."""
+    def stalled(
+        self, now_ns: int, errors: tuple[float, float], tolerances: tuple[float, float], limited: Sequence[int] = ()
+    ) -> bool:
+        """True when the window that ends now made no progress (then a new window starts).
+        ``limited``: the joints limited at this step."""
         if self._start_ns is None:
-            self._start_ns, self._start_errors = now_ns, errors
+            self._start_ns, self._start_errors, self._limited = now_ns, errors, set(limited)
             return False
+        self._limited.intersection_update(limited)
         if now_ns - self._start_ns < self.window_ns:
             return False
         progress = any(
             start > tolerance and error < (1.0 - PROGRESS_FRACTION) * start
             for error, start, tolerance in zip(errors, self._start_errors, tolerances)
         )
-        self._start_ns, self._start_errors = now_ns, errors
+        self.limited_throughout = tuple(sorted(self._limited))
+        self._start_ns, self._start_errors, self._limited = now_ns, errors, set(limited)
         return not progress
 
 
@@ -296,7 +307,8 @@ class ControllerSupervisor:
         """Classify a pose step. Converged only while the goal is not moving (no feed-forward
         motion), counting the task's error components only. A resting goal whose error stops
         falling (:class:`ProgressMonitor`) while the arm is singular or at joint limits (held
-        by the law, or braked before one: ``braking_joints``) is unreachable."""
+        by the law, or braked before one: ``braking_joints``, at every step of the window) is
+        unreachable."""
         orientation_error, position_error = self.config.task.error_norms(
             output.orientation_error, output.position_error
         )
@@ -313,12 +325,12 @@ class ControllerSupervisor:
         elif goal_moving:
             self.progress.restart()
             self._classify_limits(limited, "moving towards the goal")
-        elif self.progress.stalled(now_ns, (position_error, orientation_error), tolerances) and (
-            output.singular or limited
+        elif self.progress.stalled(now_ns, (position_error, orientation_error), tolerances, limited) and (
+            output.singular or self.progress.limited_throughout
         ):
             self.unreachable_errors = (position_error, orientation_error)
-            if limited:
-                why = f"joints at their limits: {', '.join(self.joint_names[i] for i in limited)}"
+            if held := self.progress.limited_throughout:
+                why = f"joints at their limits: {', '.join(self.joint_names[i] for i in held)}"
             else:
                 why = f"stretched and singular (manipulability {output.manipulability:.3g})"
             self._set(

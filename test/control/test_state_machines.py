@@ -173,6 +173,32 @@ def test_moving_goal_is_not_converged_and_singular_and_limits_are_reported():
     assert supervisor.level == "ok"
 
 
+def _stalled(steps):
+    """The state and detail after a goal's error stayed put for a progress window, with
+    ``steps``' (braking joints, output keywords) spread over the window."""
+    supervisor = _controller()
+    window_ns = int(supervisor.config.progress_window * 1e9)
+    for i, (braking, output) in enumerate(steps):
+        now_ns = i * (window_ns + 1) // (len(steps) - 1)
+        supervisor.pose_step_done(_pose_output(position=(0.1, 0, 0), **output), False, now_ns, braking)
+    return supervisor.state, supervisor.detail
+
+
+def test_an_unreachable_goal_names_the_limits_held_all_along_else_the_singularity():
+    unreachable = ControllerState.UNREACHABLE
+    held = [((), {"limited": (1,)})] * 3
+    assert _stalled(held)[0] is unreachable and "joints at their limits: j2;" in _stalled(held)[1]
+    braked = [((2,), {})] * 3  # braked before the limit, all along
+    assert _stalled(braked)[0] is unreachable and "joints at their limits: j3;" in _stalled(braked)[1]
+    both = [((2,), {"limited": (1,), "singular": True})] * 3
+    assert "joints at their limits: j2, j3;" in _stalled(both)[1]
+    # Singular, a joint limited in some cycles only (the rates swing wide): the singularity.
+    swinging = [((), {"singular": True}), ((2,), {"singular": True}), ((), {"limited": (2,), "singular": True})]
+    assert _stalled(swinging)[0] is unreachable and "stretched and singular" in _stalled(swinging)[1]
+    # Neither singular nor limited all along: not (yet) unreachable.
+    assert _stalled([((), {}), ((), {}), ((2,), {})])[0] is not unreachable
+
+
 def test_step_failure_is_stale_input():
     supervisor = _controller()
     supervisor.step_failed(ValueError("q contains NaN"))

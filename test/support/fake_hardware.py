@@ -7,8 +7,9 @@ Like ``robot_state_publisher`` + ros2_control's fake hardware with a
 * publishes ``joint_states`` for every joint it has: the arm's, plus a gripper finger joint
   that is not part of any arm chain, in a fixed order of its own;
 * integrates the velocities of ``/forward_velocity_controller/commands``
-  (std_msgs/Float64MultiArray, one value per arm joint in its ``joints`` order) and holds
-  still when no command is fresh; with ``command_timeout=math.inf`` it holds the last
+  (std_msgs/Float64MultiArray, one value per arm joint in its ``joints`` order) over real time,
+  each from its arrival until the next (a zero-order hold), and holds still when no command is
+  fresh; with ``command_timeout=math.inf`` it holds the last
   command forever, as JointGroupVelocityController does (the arm keeps moving on it).
 
 Every command received is kept with its arrival time (:attr:`commands`).
@@ -108,18 +109,27 @@ class FakeHardware:
             if values.shape != self.q.shape or not np.all(np.isfinite(values)):
                 self.rejected_commands += 1
                 return
+            now = time.monotonic()
+            self._advance(now)  # the previous command moved the arm until now
             self._command = values
-            self._command_time = time.monotonic()
+            self._command_time = now
             self.commands_received += 1
             self.commands.append((self._command_time, values))
 
+    def _advance(self, now: float) -> None:
+        """Integrate the held command from the last integration to ``now`` [s, monotonic]: the
+        whole real interval, as an arm moves on it even when this thread was held up (a stall
+        that dropped motion would make the arm lag, then catch up faster than commanded)."""
+        if self._command is not None:
+            moving_until = min(now, self._command_time + self._timeout)
+            if moving_until > self._last:
+                self.q = self.q + self._command * (moving_until - self._last)
+        self._last = now
+
     def _step(self) -> None:
         now = time.monotonic()
-        dt = min(now - self._last, 3 * self._dt)
-        self._last = now
         with self._lock:
-            if self._command is not None and now - self._command_time <= self._timeout:
-                self.q = self.q + self._command * dt
+            self._advance(now)
             q = self.q.copy()
             self.history.append(q)
             self.history_times.append(now)
