@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sysconfig
+import time
 from pathlib import Path
 
 import numpy as np
@@ -128,8 +129,8 @@ def _check_the_line(irb120, client, samples, start, end):
     )
     bound = 6e-3 + 0.4 * lateness_s
     assert deviation.max() < bound, (deviation.max(), bound, REALTIME_ERROR or "SCHED_FIFO")
-    # Converged: the tool is on the end point (a fresh pose: the samples above can lag behind).
-    np.testing.assert_allclose(client.current_tool_pose()[:3, 3], end, atol=2e-4)
+    # Converged: the tool is on the end point (fresh poses: the samples above can lag behind).
+    _assert_settles_on(client, end)
     # Orientation held pointing down all along.
     assert max(np.abs(p[:3, :3] - DOWN).max() for p in poses) < 0.02
 
@@ -149,6 +150,19 @@ def test_cli_line_wait_succeeds_and_ends_on_the_target(irb120):
         irb120, "line", "--xyz", *map(str, end), "--rpy", "0", str(math.pi / 2), "0", "--wait", "--timeout", "30"
     )
     assert result.returncode == 0, result.stderr + result.stdout
-    tool = irb120.client().current_tool_pose()
-    np.testing.assert_allclose(tool[:3, 3], end, atol=2e-4)
+    tool = _assert_settles_on(irb120.client(), end)
     np.testing.assert_allclose(tool[:3, :3], DOWN, atol=2e-3)
+
+
+def _assert_settles_on(client, end, atol=2e-4, timeout=3.0):
+    """The tool settles within ``atol`` [m] of ``end`` within ``timeout`` s of fresh poses and
+    stays there; returns the last pose. Convergence is judged on the controller's estimate of
+    a state a few ms old, and a loop that ran late then still carries the arm by a fraction of
+    a millimetre (0.26 mm seen under load), which the controller takes back."""
+    deadline = time.monotonic() + timeout
+    while np.abs((tool := client.current_tool_pose())[:3, 3] - end).max() >= atol and time.monotonic() < deadline:
+        client.spin_for(0.02)
+    np.testing.assert_allclose(tool[:3, 3], end, atol=atol)
+    client.spin_for(0.2)
+    np.testing.assert_allclose(client.current_tool_pose()[:3, 3], end, atol=atol)  # held there
+    return tool

@@ -72,11 +72,19 @@ def held_speed(hardware) -> float:
     return 0.0 if command is None else float(np.max(np.abs(command)))
 
 
-def assert_stream_within(commands: np.ndarray, limits: JointLimits, dt: float) -> None:
-    """Every command's finite-difference acceleration and jerk within the limits."""
-    stream = np.vstack([np.zeros((2, commands.shape[1])), commands])
+def assert_stream_within(
+    commands: np.ndarray, limits: JointLimits, dt: float, from_rest: bool = True, context: str = ""
+) -> None:
+    """Every command's finite-difference acceleration and jerk within the limits; from rest
+    (``from_rest``: the stream is the whole stream), else from its first two commands on.
+    ``context`` is added to the failure's message."""
+    stream = np.vstack([np.zeros((2, commands.shape[1])), commands]) if from_rest else commands
     acceleration = np.diff(stream, axis=0) / dt
     jerk = np.diff(acceleration, axis=0) / dt
-    ratio_a = np.max(np.abs(acceleration) / limits.acceleration)
-    ratio_j = np.max(np.abs(jerk) / limits.jerk)
-    assert ratio_a <= 1 + SLACK and ratio_j <= 1 + SLACK, (ratio_a, ratio_j)
+    ratio_a = np.max(np.abs(acceleration) / limits.acceleration, axis=1)
+    ratio_j = np.max(np.abs(jerk) / limits.jerk, axis=1)
+    worst_a, worst_j = int(np.argmax(ratio_a)), int(np.argmax(ratio_j))
+    assert ratio_a[worst_a] <= 1 + SLACK and ratio_j[worst_j] <= 1 + SLACK, (
+        f"acceleration {ratio_a[worst_a]:.3g} x its limit at step {worst_a}, jerk {ratio_j[worst_j]:.3g} x at "
+        f"step {worst_j}, of {len(stream) - 1} steps{' from rest' if from_rest else ''}{context}"
+    )
