@@ -157,8 +157,8 @@ def test_cli_line_wait_succeeds_and_ends_on_the_target(irb120):
 def _assert_settles_on(client, end, atol=2e-4, timeout=3.0):
     """The tool settles within ``atol`` [m] of ``end`` within ``timeout`` s of fresh poses and
     stays there; returns the last pose. Convergence is judged on the controller's estimate of
-    a state a few ms old, and a loop that ran late then still carries the arm by a fraction of
-    a millimetre (0.26 mm seen under load), which the controller takes back."""
+    a state a few ms old; under load the tool was once 0.26 mm off in the first pose taken
+    after it (not traced further), and the controller holding the goal takes it onto the end."""
     deadline = time.monotonic() + timeout
     while np.abs((tool := client.current_tool_pose())[:3, 3] - end).max() >= atol and time.monotonic() < deadline:
         client.spin_for(0.02)
