@@ -116,9 +116,10 @@ def test_ctrl_c_of_goal_wait_stops_the_motion(tmp_path):
         except AssertionError:
             cli.kill()
             raise AssertionError((cli.communicate(timeout=5), pipeline.log_tail("cartesian_controller"))) from None
+        moving = hardware.held_command()
         cli.send_signal(signal.SIGINT)
-        _, stderr = cli.communicate(timeout=20)
-        assert cli.returncode == 130, stderr
+        stdout, stderr = cli.communicate(timeout=20)
+        assert cli.returncode == 130, (stdout, stderr, moving, hardware.commands_received)
         assert "stopped the motion" in stderr
         status = client.wait_status("cartesian_controller", 5, after_ns=client.now_ns())
         assert client.spin_until(lambda: client.latest_status("cartesian_controller").message == "stopped", 5), status
