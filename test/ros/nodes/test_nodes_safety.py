@@ -110,14 +110,29 @@ def test_a_goal_out_of_reach_of_a_stretched_arm_is_unreachable_and_singular(harn
     goal = make_transform(np.eye(3), [0.95, 0.0, 0.63])  # the arm spans 0.64 m from its shoulder
     model, q, detail, status = _unreachable(harness, "irb120", np.zeros(6), goal, task="position")
     assert "goal out of reach" in detail and "stretched and singular" in detail, detail
-    # Independently: the position Jacobian at the final configuration is (nearly) rank deficient.
-    jacobian = numeric_geometric_jacobian(lambda x: frame_pose(irb120, x), q)[3:]
-    singular_values = np.linalg.svd(jacobian, compute_uv=False)
-    assert singular_values[-1] < 0.02
-    # The closest pose reached is the one reported.
+    # Independently, the arm stopped stretched towards the goal, about as close as it can get.
+    # The detector gives up once the error falls by less than 2 % in a window, so the arm can
+    # stop short of the stretch by about that: a loaded machine's run stopped 2.1 % further
+    # than the closest, its smallest singular value 0.025 (at q = 0: 0.17, 0.58 m away).
     distance = np.linalg.norm(goal[:3, 3] - frame_pose(irb120, q)[:3, 3])
+    assert distance < 1.03 * _closest_reachable(irb120, goal[:3, 3], q), distance
+    jacobian = numeric_geometric_jacobian(lambda x: frame_pose(irb120, x), q)[3:]
+    assert np.linalg.svd(jacobian, compute_uv=False)[-1] < 0.05
+    # The closest pose reached is the one reported.
     reported = float(status["unreachable_errors"].split()[0])
     assert reported == pytest.approx(distance, abs=1e-3)
+
+
+def _closest_reachable(model, position, q, iterations=200) -> float:
+    """The smallest distance [m] from ``position`` the tool reaches from ``q`` on: damped
+    Gauss-Newton steps on a numeric Jacobian, each at most 0.05 rad, within the joint limits."""
+    q = np.array(q, float)
+    for _ in range(iterations):
+        error = position - frame_pose(model, q)[:3, 3]
+        jacobian = numeric_geometric_jacobian(lambda x: frame_pose(model, x), q)[3:]
+        step = jacobian.T @ np.linalg.solve(jacobian @ jacobian.T + 1e-2 * np.eye(3), error)
+        q = np.clip(q + step * min(1.0, 0.05 / np.abs(step).max()), model.lower, model.upper)
+    return float(np.linalg.norm(position - frame_pose(model, q)[:3, 3]))
 
 
 def test_a_goal_beyond_a_joint_limit_is_unreachable_naming_the_joint(harness):
