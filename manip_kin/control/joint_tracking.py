@@ -4,8 +4,9 @@
 correction (gain ``K`` [1/s]; a constant offset decays as ``exp(−K t)``). Then the limits,
 as the cartesian law applies them (:mod:`manip_kin.control.resolved_rate`):
 
-1. position limits: a joint whose rate would carry it past a limit within the control
-   period ``dt`` gets the rate that lands it exactly on the limit (zero once there);
+1. position limits: a joint whose rate, held to its velocity limit, would carry it past a
+   limit within the control period ``dt`` gets the rate that lands it exactly on the limit
+   (zero once there);
 2. velocity limits: the whole ``q̇`` is scaled by one factor so every joint is within its
    limit, which keeps the direction of motion in joint space (a straight joint-space move
    stays straight, only slower).
@@ -72,7 +73,9 @@ def joint_tracking_step(
         qdot = qdot + model.check_q(qdot_reference, "qdot_reference")
     limited: tuple[int, ...] = ()
     if respect_position_limits:
-        landing = q + qdot * dt
+        # The rate the joint can have: the scaling below brings every rate within its limit.
+        reach = np.clip(qdot, -model.velocity_limits, model.velocity_limits) if respect_velocity_limits else qdot
+        landing = q + reach * dt
         low = (qdot < 0.0) & (landing < model.lower)
         high = (qdot > 0.0) & (landing > model.upper)
         if low.any() or high.any():

@@ -65,9 +65,11 @@ def reference_step(
     qdot, damping, singular, manipulability = _damped_rates(jacobian, task_twist, epsilon_sq, damping_max_sq)
 
     # 4. Position limits: hold the worst offender on the rate that lands it on its limit,
-    # re-solve the rest of the task over the other joints, repeat.
+    # re-solve the rest of the task over the other joints, repeat. A joint offends when its
+    # rate, held to its velocity limit (step 5 scales it there), crosses a limit within dt.
     held: dict[int, float] = {}
     if config.respect_position_limits:
+        top_speeds = model.velocity_limits if config.respect_velocity_limits else np.full(model.dof, np.inf)
         reduced = jacobian.copy()
         residual = task_twist.copy()
         for _ in range(model.dof):
@@ -75,7 +77,7 @@ def reference_step(
             for j in range(model.dof):
                 if j in held:
                     continue
-                landing = q[j] + qdot[j] * dt
+                landing = q[j] + np.clip(qdot[j], -top_speeds[j], top_speeds[j]) * dt
                 if qdot[j] < 0.0 and landing < model.lower[j]:
                     rate = min((model.lower[j] - q[j]) / dt, 0.0)
                 elif qdot[j] > 0.0 and landing > model.upper[j]:

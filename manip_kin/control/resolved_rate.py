@@ -13,8 +13,9 @@ One step, from the joint positions ``q`` and a goal pose (plus an optional goal 
    ``ε = singular_threshold`` and rises smoothly below it (Chiaverini's rule),
    ``λ² = λ_max² (1 - (σ_min / ε)²)``: exact tracking away from singularities, bounded rates
    at them, and motion in every non-singular direction so the arm never stops at one.
-4. Position limits (SNS-style, after Flacco et al.): a joint whose rate would carry it past a
-   limit within the control period ``dt`` is saturated at the rate that lands it exactly on
+4. Position limits (SNS-style, after Flacco et al.): a joint whose rate, held to its
+   velocity limit (step 5 brings it there), would carry it past a limit within the control
+   period ``dt`` is saturated at the rate that lands it exactly on
    the limit (zero once it is there), its column is removed from ``J`` and the task minus
    its contribution is re-solved over the remaining joints; repeat until no joint violates.
    The task is thus redistributed instead of being distorted by a clamp.
@@ -223,6 +224,9 @@ class CartesianController:
         self._lower = model.lower.tolist()
         self._upper = model.upper.tolist()
         self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
+        # The fastest a joint can move in a cycle: the velocity scaling brings every rate within
+        # its limit, so a joint further than that from a limit cannot reach it this cycle.
+        self._top_speeds = model.velocity_limits.tolist() if config.respect_velocity_limits else [math.inf] * n
         self._epsilon_sq = config.singular_threshold**2
         self._damping_max_sq = config.damping_max**2
         # The one damped least-squares solve (exact σ_min, Chiaverini's damping) for the cases
@@ -314,11 +318,14 @@ class CartesianController:
 
         Repeatedly saturates the joint that violates its bound the most (relative to its
         velocity limit) at the rate that lands it on the limit, removes its column and
-        re-solves the remaining task over the other joints.
+        re-solves the remaining task over the other joints. A joint violates its bound when
+        its rate, held to its velocity limit, crosses it within ``dt``: a rate above the limit
+        is scaled down afterwards, and counting it whole held joints a second away from their
+        limits (a goal metres away: 1500 rad/s) and slowed the whole arm to a crawl.
         """
         n, rows = self._n, self._rows
         lower, upper = self._lower, self._upper
-        inverse_limits = self._inverse_velocity_limits
+        inverse_limits, top_speeds = self._inverse_velocity_limits, self._top_speeds
         reduced = list(values)  # the chain output with the held joints' columns zeroed
         residual = list(rhs)
         held: dict[int, float] = {}
@@ -329,10 +336,11 @@ class CartesianController:
                 if j in held:
                     continue
                 rate = qdot[j]
+                reach = max(-top_speeds[j], min(rate, top_speeds[j])) * dt
                 # The rate that lands exactly on the limit; 0 for a joint already at or past it.
-                if rate < 0.0 and q_values[j] + rate * dt < lower[j]:
+                if rate < 0.0 and q_values[j] + reach < lower[j]:
                     bound = min((lower[j] - q_values[j]) / dt, 0.0)
-                elif rate > 0.0 and q_values[j] + rate * dt > upper[j]:
+                elif rate > 0.0 and q_values[j] + reach > upper[j]:
                     bound = max((upper[j] - q_values[j]) / dt, 0.0)
                 else:
                     continue

@@ -206,11 +206,16 @@ def test_tracking_law_feed_forward_plus_correction():
 
 
 def test_tracking_law_respects_position_and_velocity_limits():
-    # joint3 (prismatic, [0, 0.5] m) 1 mm above its lower limit, commanded down hard.
-    q = np.array([0.0, 0.0, 0.001, 0.0])
+    # joint3 (prismatic, [0, 0.5] m) 0.5 mm above its lower limit, commanded down hard: a
+    # period at its velocity limit (0.5 m/s) would take it 1 mm down.
+    q = np.array([0.0, 0.0, 0.0005, 0.0])
     out = joint_tracking_step(SCARA, q, q, np.array([0.0, 0.0, -1.0, 0.0]), gain=1.0, dt=0.002)
     assert out.limited_joints == (2,)
-    assert out.qdot[2] == pytest.approx(-0.5)  # lands exactly on the limit in one period
+    assert out.qdot[2] == pytest.approx(-0.25)  # lands exactly on the limit in one period
+    # 1 mm above: at most its velocity limit, the joint cannot pass the limit in a period, so
+    # it is not held; the scaling brings it to the limit's 0.5 m/s, landing on the limit.
+    near = joint_tracking_step(SCARA, q * 2, q * 2, np.array([0.0, 0.0, -1.0, 0.0]), gain=1.0, dt=0.002)
+    assert near.limited_joints == () and near.qdot[2] == pytest.approx(-0.5)
     at_limit = joint_tracking_step(SCARA, np.array([0, 0, 0.0, 0]), q, np.array([0, 0, -1.0, 0]), 0.0, 0.002)
     assert at_limit.qdot[2] == 0.0 and at_limit.limited_joints == (2,)
     # Far beyond the velocity limits: scaled by one factor, direction kept.
