@@ -224,8 +224,8 @@ class CartesianController:
         self._lower = model.lower.tolist()
         self._upper = model.upper.tolist()
         self._inverse_velocity_limits = (1.0 / model.velocity_limits).tolist()
-        # The fastest a joint can move in a cycle: the velocity scaling brings every rate within
-        # its limit, so a joint further than that from a limit cannot reach it this cycle.
+        # The fastest a joint moves: the velocity scaling brings every rate within its limit,
+        # so a joint further than this times dt from a limit cannot reach it within dt.
         self._top_speeds = model.velocity_limits.tolist() if config.respect_velocity_limits else [math.inf] * n
         self._epsilon_sq = config.singular_threshold**2
         self._damping_max_sq = config.damping_max**2
@@ -320,8 +320,9 @@ class CartesianController:
         velocity limit) at the rate that lands it on the limit, removes its column and
         re-solves the remaining task over the other joints. A joint violates its bound when
         its rate, held to its velocity limit, crosses it within ``dt``: a rate above the limit
-        is scaled down afterwards, and counting it whole held joints a second away from their
-        limits (a goal metres away: 1500 rad/s) and slowed the whole arm to a crawl.
+        is scaled down afterwards. Counted whole, the rates for a goal metres away held joints
+        that could not reach a limit within the horizon (1.6 rad from one over 0.5 s), and a
+        held joint's landing rate then set the velocity scale: the arm crawled.
         """
         n, rows = self._n, self._rows
         lower, upper = self._lower, self._upper
