@@ -74,6 +74,13 @@ class GeneratorSupervisor:
         self.state, self.detail = GeneratorState.REJECTED, reason
         return "nothing to do"
 
+    def has_taken(self, stamp: str) -> bool:
+        """True for the stamp of the motion started last (streaming, holding or stopped): a
+        client that missed the report of it sends the same target again (same stamp), and
+        planning it again would start a second, shorter motion from wherever the arm is then.
+        ``""`` (an unstamped target) is always new."""
+        return bool(stamp) and stamp == self.target_stamp
+
     def start(self, motion: Motion, kind: str, now_ns: int, stamp: str, detail: str) -> bool:
         """A motion was planned and starts now; True when it pre-empted a running one."""
         preempted = self.state is GeneratorState.STREAMING

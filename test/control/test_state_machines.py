@@ -298,6 +298,8 @@ def test_generator_streams_finishes_and_is_preempted():
     assert supervisor.state is GeneratorState.HOLDING and supervisor.final_goal_stamp == "6.0"
     assert supervisor.time_into_motion(3300 * MS) is None and supervisor.progress == 1.0
     assert "joint trajectory finished" in supervisor.detail
+    # The same target sent again (a client that missed the report) is one it has; a new is not.
+    assert supervisor.has_taken("5.0") and not supervisor.has_taken("5.5") and not supervisor.has_taken("")
     # A new motion while streaming pre-empts; its final stamp starts empty.
     supervisor.start(_Motion(1.0), "line", 4000 * MS, "7.0", "a line")
     assert supervisor.start(_Motion(1.0), "line", 4100 * MS, "8.0", "another line")

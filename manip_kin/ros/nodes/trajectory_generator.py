@@ -119,16 +119,6 @@ class TrajectoryGeneratorNode(LoopingNode):
         """The current state (see :class:`~manip_kin.control.generator_supervisor.GeneratorState`)."""
         return self.supervisor.state
 
-    @property
-    def rejected_targets(self) -> int:
-        """Targets rejected since the start."""
-        return self.supervisor.rejected_targets
-
-    @property
-    def last_rejection(self) -> str:
-        """Why the last target was rejected."""
-        return self.supervisor.last_rejection
-
     # --- parameters ----------------------------------------------------------------------------
 
     def _configure(self, params: GeneratorParams) -> None:
@@ -183,10 +173,19 @@ class TrajectoryGeneratorNode(LoopingNode):
     def _take_inputs(self, now_ns: int) -> PoseStamped | JointTrajectory | None:
         """Drain the goals; return the newest valid one of either kind (None when there is none).
 
-        When a line target and a trajectory come in the same cycle, the later stamp wins.
+        When a line target and a trajectory come in the same cycle, the later stamp wins. One
+        sent again with the stamp of the motion already taken is dropped (``has_taken``); an
+        unstamped one (zero) is always new.
         """
+
+        def taken(msg) -> bool:
+            stamp = msg.header.stamp
+            return bool(stamp.sec or stamp.nanosec) and self.supervisor.has_taken(stamp_key(stamp))
+
         target = None
         while (msg := self._target_sub.take()) is not None:
+            if taken(msg):
+                continue
             problem = pose_problem(
                 msg, self.base_frame, "line target", self._quaternion_tolerance, self.bounds.max_target_distance
             )
@@ -196,7 +195,8 @@ class TrajectoryGeneratorNode(LoopingNode):
             target = msg
         trajectory = None
         while (msg := self._trajectory_sub.take()) is not None:
-            trajectory = msg  # checked when planned
+            if not taken(msg):
+                trajectory = msg  # checked when planned
         if target is None or (
             trajectory is not None and stamp_to_ns(trajectory.header.stamp) >= stamp_to_ns(target.header.stamp)
         ):

@@ -271,8 +271,8 @@ def test_the_generator_refuses_a_line_and_a_joint_trajectory_through_a_box(harne
             f"{namespace}/line_target",
             make_pose_stamped(goal, "base_link", harness.node.get_clock().now().to_msg()),
         )
-        assert harness.spin_until(lambda: node.rejected_targets == 1, 5), node.state
-        reason = node.last_rejection
+        assert harness.spin_until(lambda: node.supervisor.rejected_targets == 1, 5), node.state
+        reason = node.supervisor.last_rejection
         found = re.search(r"at (\d+) % of the way", reason)
         assert found, reason
         percent = float(found.group(1))
@@ -284,9 +284,9 @@ def test_the_generator_refuses_a_line_and_a_joint_trajectory_through_a_box(harne
         trajectory = make_joint_trajectory(model.joint_names, [TrajectoryPoint(2.0, GOAL_Q.tolist())])
         trajectory.header.stamp = harness.node.get_clock().now().to_msg()
         harness.publish(f"{namespace}/joint_trajectory", trajectory)
-        assert harness.spin_until(lambda: node.rejected_targets == 2, 5), node.state
-        assert "joint trajectory not free of collision" in node.last_rejection
-        assert "% of the way" in node.last_rejection and "obstacle:cell/1" in node.last_rejection
+        assert harness.spin_until(lambda: node.supervisor.rejected_targets == 2, 5), node.state
+        assert "joint trajectory not free of collision" in node.supervisor.last_rejection
+        assert "% of the way" in node.supervisor.last_rejection and "obstacle:cell/1" in node.supervisor.last_rejection
         # Without the box both are free: the line starts.
         clear = MarkerArray(markers=[Marker(action=Marker.DELETEALL)])
         harness.publish(topic, clear)
@@ -295,7 +295,7 @@ def test_the_generator_refuses_a_line_and_a_joint_trajectory_through_a_box(harne
             f"{namespace}/line_target",
             make_pose_stamped(goal, "base_link", harness.node.get_clock().now().to_msg()),
         )
-        assert harness.spin_until(lambda: node.state == "streaming", 5), node.last_rejection
+        assert harness.spin_until(lambda: node.state == "streaming", 5), node.supervisor.last_rejection
     finally:
         hardware.close()
 

@@ -152,7 +152,7 @@ def test_rejects_bad_and_unreachable_targets(harness, capfd):
     unreachable = make_pose_stamped(make_transform(np.eye(3), [1.5, 0.0, 0.6]), "base_link", ns_to_stamp(5))
     for msg in (nan, wrong_frame, zero_quat, unreachable):
         harness.publish("/line_target", msg)
-    assert harness.spin_until(lambda: node.rejected_targets == 4, 5, every=stream)
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == 4, 5, every=stream)
     harness.spin_for(0.1, every=stream)
     assert not goals and node.state == "rejected"
     logged = capfd.readouterr().err
@@ -168,15 +168,15 @@ def test_rejects_bad_and_unreachable_targets(harness, capfd):
 def test_no_old_or_bad_joint_state_rejected(harness):
     node, goals, _, _, _ = _start(harness, joint_state_timeout=0.5)
     harness.publish("/line_target", make_pose_stamped(TARGET, "base_link"))
-    assert harness.spin_until(lambda: node.rejected_targets == 1, 3)
-    assert "no current /joint_states" in node.last_rejection and not goals
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == 1, 3)
+    assert "no current /joint_states" in node.supervisor.last_rejection and not goals
     # A joint state stamped 0.7 s ago is too old to start a line from with a 0.5 s timeout...
     old = ns_to_stamp(harness.node.get_clock().now().nanoseconds - 700_000_000)
     harness.publish("/joint_states", make_joint_state(MODEL.joint_names, Q0, stamp=old))
     harness.spin_for(0.1)
     harness.publish("/line_target", make_pose_stamped(TARGET, "base_link"))
-    assert harness.spin_until(lambda: node.rejected_targets == 2, 3)
-    assert "no current /joint_states" in node.last_rejection and not goals
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == 2, 3)
+    assert "no current /joint_states" in node.supervisor.last_rejection and not goals
     # ... and current with a 1 s timeout: the line starts.
     from rclpy.parameter import Parameter
 
@@ -193,10 +193,32 @@ def test_no_old_or_bad_joint_state_rejected(harness):
     harness.publish("/joint_states", make_joint_state(MODEL.joint_names[:5], Q0[:5], stamp=now))
     harness.spin_for(0.1)
     harness.publish("/line_target", make_pose_stamped(START, "base_link"))
-    assert harness.spin_until(lambda: node.rejected_targets == 3, 3)
-    assert "lacks joints" in node.last_rejection and MODEL.joint_names[5] in node.last_rejection
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == 3, 3)
+    assert "lacks joints" in node.supervisor.last_rejection and MODEL.joint_names[5] in node.supervisor.last_rejection
     harness.spin_for(0.1)
     assert node.state == "rejected" and len(goals) == count
+
+
+def test_a_target_sent_again_is_not_planned_again(harness):
+    """A client that missed the generator's report sends the target again with its stamp:
+    the running line goes on (no second plan from where the arm is by then); a new stamp
+    with the same pose is a new target."""
+    node, goals, _, paths, _ = _start(harness, max_linear_velocity=0.1)
+    stream = _state_stream(harness)
+    harness.spin_for(0.1, every=stream)
+    target = make_pose_stamped(TARGET, "base_link", harness.node.get_clock().now().to_msg())
+    harness.publish("/line_target", target)
+    assert harness.spin_until(lambda: node.state == "streaming" and len(goals) > 20, 3, every=stream)
+    started = node.supervisor.started_ns
+    stream = _state_stream(harness, np.array([0.05, 0.1, -0.05, 0.1, -0.1, 0.2]))  # the arm moved on
+    harness.spin_for(0.1, every=stream)
+    harness.publish("/line_target", target)
+    harness.spin_for(0.3, every=stream)
+    assert len(paths) == 1 and node.supervisor.started_ns == started and node.state == "streaming"
+    target.header.stamp = harness.node.get_clock().now().to_msg()
+    harness.publish("/line_target", target)
+    assert harness.spin_until(lambda: len(paths) == 2, 3, every=stream)
+    assert node.supervisor.started_ns > started
 
 
 def test_new_target_preempts_from_current_pose(harness):

@@ -67,7 +67,9 @@ def test_generator_survives_the_burst_and_follows_a_line_after(harness, capfd):
     ]
     for msg in burst:
         harness.publish("/line_target", msg)
-    assert harness.spin_until(lambda: node.rejected_targets == len(burst), 5, every=stream), node.last_rejection
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == len(burst), 5, every=stream), (
+        node.supervisor.last_rejection
+    )
     assert node.loop.running and node.loop.stats().errors == 0 and not goals
     # One line per kind of problem (reach, quaternion, finite): throttled, not one per message.
     # The counter rises before the log line is written: read once the loop has moved on.

@@ -148,8 +148,8 @@ def test_bad_trajectories_rejected_with_the_reason(harness, capfd):
     node, references, _, diagnostics = _start_generator(harness)
     # No joint state yet: nothing to start from.
     harness.publish("joint_trajectory", _trajectory([TrajectoryPoint(1.0, [0.1] * 4)], harness=harness))
-    assert harness.spin_until(lambda: node.rejected_targets == 1, 3)
-    assert "no current" in node.last_rejection and "joint_states" in node.last_rejection
+    assert harness.spin_until(lambda: node.supervisor.rejected_targets == 1, 3)
+    assert "no current" in node.supervisor.last_rejection and "joint_states" in node.supervisor.last_rejection
     stream = _state_stream(harness)
     harness.spin_for(0.1, every=stream)
     bad = [
@@ -165,12 +165,12 @@ def test_bad_trajectories_rejected_with_the_reason(harness, capfd):
     ]
     for count, (msg, fragment) in enumerate(bad, start=2):
         harness.publish("joint_trajectory", msg)
-        assert harness.spin_until(lambda c=count: node.rejected_targets == c, 3, every=stream), (
+        assert harness.spin_until(lambda c=count: node.supervisor.rejected_targets == c, 3, every=stream), (
             fragment,
-            node.rejected_targets,
-            node.last_rejection,
+            node.supervisor.rejected_targets,
+            node.supervisor.last_rejection,
         )
-        assert fragment in node.last_rejection, (fragment, node.last_rejection)
+        assert fragment in node.supervisor.last_rejection, (fragment, node.supervisor.last_rejection)
     assert node.state == "rejected" and not references
     logged = capfd.readouterr().err
     assert "rejected joint_trajectory" in logged or "rejected /joint_trajectory" in logged

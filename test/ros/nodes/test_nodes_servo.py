@@ -51,12 +51,16 @@ def _jog(harness, node, names, velocities):
 STREAM_GAP_S = 0.05
 
 
-def _tool_velocity(harness, hardware, stream, settle: float, window: float, node=None, attempts: int = 3) -> np.ndarray:
+def _tool_velocity(
+    harness, hardware, streams, settle: float, window: float, node=None, attempts: int = 3
+) -> tuple[np.ndarray, int]:
     """The controlled frame's mean linear velocity [m/s] over ``window`` after ``settle`` s, from
-    the arm's own steps and their times. A window is measured again when the machine, not the
-    controller's law, spoiled it: this process, starved, left a gap in its stream (the controller
-    then halts, as it must), or a cycle of ``node``'s loop stalled (the middleware held a publish:
-    204 ms seen in a loaded suite run)."""
+    the arm's own steps and their times, and which of ``streams`` (taken in turn) it was
+    measured on. A window is measured again when the machine, not the controller's law, spoiled
+    it: this process, starved, left a gap in its stream (the controller then halts, as it must),
+    or a cycle of ``node``'s loop stalled (the middleware held a publish: 204 ms seen in a loaded
+    suite run). Streams that alternate keep the arm where it was: one stream again and again
+    carried it 20 cm on, into the slowdown near the workspace's edge (0.019 m/s of 0.04)."""
     sent: list[float] = []
 
     def timed_stream():
@@ -70,7 +74,8 @@ def _tool_velocity(harness, hardware, stream, settle: float, window: float, node
             return "the controller's loop stalled"
         return ""
 
-    for _ in range(attempts):
+    for attempt in range(attempts):
+        stream = streams[attempt % len(streams)]
         sent.clear()
         stalls = node.loop.stats().stalls if node is not None else 0  # the settling counts too
         harness.spin_for(settle, every=timed_stream)
@@ -82,7 +87,8 @@ def _tool_velocity(harness, hardware, stream, settle: float, window: float, node
             break
     assert not reason, f"{reason} in each of {attempts} windows"
     start, end = frame_pose(IRB120, hardware.history[first]), frame_pose(IRB120, hardware.history[last])
-    return (end[:3, 3] - start[:3, 3]) / (hardware.history_times[last] - hardware.history_times[first])
+    velocity = (end[:3, 3] - start[:3, 3]) / (hardware.history_times[last] - hardware.history_times[first])
+    return velocity, attempt % len(streams)
 
 
 @pytest.mark.parametrize("frame", ["base_link", "ee"])
@@ -93,8 +99,9 @@ def test_a_twist_moves_the_frame_at_the_commanded_velocity(harness, frame):
         commanded = np.array([0.04, 0.0, 0.0])
         rotation = np.eye(3) if frame == "base_link" else frame_pose(IRB120, Q_WORK)[:3, :3]
         # 1.5 s: the lag of the ramp (v·0.1 s) caught up to 0.1 % by then, at gain 4.
-        velocity = _tool_velocity(harness, hardware, _twist(harness, node, commanded, frame=frame), 1.5, 1.0, node)
-        expected = rotation @ commanded  # a pure translation: the frame's rotation stays put
+        there_and_back = [_twist(harness, node, sign * commanded, frame=frame) for sign in (1.0, -1.0)]
+        velocity, which = _tool_velocity(harness, hardware, there_and_back, 1.5, 1.0, node)
+        expected = rotation @ commanded * (1.0, -1.0)[which]  # a pure translation: the frame's rotation stays put
         assert np.linalg.norm(velocity - expected) < 0.02 * np.linalg.norm(expected), (velocity, expected)
         assert node.supervisor.goal_kind == "twist"
         np.testing.assert_allclose(
@@ -145,13 +152,13 @@ def test_near_a_singularity_motion_is_slowed_going_in_and_not_coming_out(harness
     model, hardware, node, _ = start_held_arm(harness, "irb120", q0, task="position", gain_linear=4.0, gain_angular=4.0)
     try:
         speed = 0.03
-        up = _tool_velocity(harness, hardware, _twist(harness, node, [0.0, 0.0, speed]), 1.0, 0.5, node)
+        up, _ = _tool_velocity(harness, hardware, [_twist(harness, node, [0.0, 0.0, speed])], 1.0, 0.5, node)
         q_in = hardware.positions()
         # Independently: the position Jacobian there is near singular, and the command slowed.
         sigma = np.linalg.svd(numeric_geometric_jacobian(lambda x: frame_pose(IRB120, x), q_in)[3:], compute_uv=False)
         assert sigma[-1] < 0.05
         assert up[2] < 0.8 * speed, up
-        down = _tool_velocity(harness, hardware, _twist(harness, node, [0.0, 0.0, -speed]), 0.8, 0.5, node)
+        down, _ = _tool_velocity(harness, hardware, [_twist(harness, node, [0.0, 0.0, -speed])], 0.8, 0.5, node)
         assert down[2] == pytest.approx(-speed, rel=0.05), down
     finally:
         hardware.close()
