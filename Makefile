@@ -34,14 +34,15 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 demo: $(STAMP)
 	$(VENV)/bin/manip_kin demo
 
-# Two pytest workers, a test file each at a time (--dist loadfile: a module's fixtures, such as
-# its pipeline, stay in one process): most of a serial run waits on nodes, not the CPU (on 2
-# cores, 5:11 against 9:39 for the suite, docs/performance.md). Each worker has its own
+# Two pytest workers, a test file each at a time (--dist loadgroup, each file its own group: a
+# module's fixtures, such as its pipeline, stay in one process), the files that run pipelines
+# one after another on one worker (test/conftest.py): most of a serial run waits on nodes, not
+# the CPU (on 2 cores, 5:11 against 9:39 for the suite, docs/performance.md). Each worker has its own
 # ROS_DOMAIN_ID (test/conftest.py). TEST_WORKERS=0 runs it in one process. -r fER lists
 # failures, errors and reruns (a test that runs nodes in real time gets one: test/conftest.py).
 TEST_WORKERS ?= 2
 test: lint system-deps $(FOXGLOVE_CLIENT)
-	$(VPY) -m pytest -q -r fER $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile) test
+	$(VPY) -m pytest -q -r fER $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadgroup) test
 
 # MuJoCo's offscreen renderer (`manip_kin plot --render` and its test) draws through EGL: Mesa's,
 # on the CPU where there is no GPU. Installed once where missing (needs root, as CI is).

@@ -53,11 +53,22 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 REAL_TIME_FOLDERS = ("cli", "pipeline", "recording", "ros")
 
 
+#: Modules that run a pipeline of node processes (at SCHED_FIFO where permitted) and assert
+#: on its timing or its path. Two of them at once on 2 cores starve each other's test client
+#: (a move's 1000 joint_states arrived as 16 to 35; a ros2_control line left its segment by
+#: 6 mm), so ``make test`` runs them one after another on one worker (``--dist loadgroup``);
+#: every other module is a group of its own, as ``--dist loadfile`` would have it.
+SERIAL_PIPELINES = ("pipeline/", "ros/nodes/test_ros2_control.py")
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
 def pytest_collection_modifyitems(items):
     for item in items:
-        folder = Path(item.path).relative_to(TEST_ROOT).parts[0]
-        if folder in REAL_TIME_FOLDERS:
+        relative = Path(item.path).relative_to(TEST_ROOT).as_posix()
+        if relative.split("/")[0] in REAL_TIME_FOLDERS:
             item.add_marker(pytest.mark.flaky(reruns=1))
+        serial = any(relative.startswith(prefix) for prefix in SERIAL_PIPELINES)
+        item.add_marker(pytest.mark.xdist_group("serial_pipelines" if serial else relative))
 
 
 @dataclass(frozen=True)

@@ -98,9 +98,19 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         assert match, log[-500:]
         np.testing.assert_allclose([float(v) for v in match.group(1).split(",")], start[:3, 3], atol=2e-4)
         # It went along the line: 1 mm is 50x what the delay of a 200 Hz loop explains (an offline
-        # estimate; the hardware runs in this busy process), and far below a line planned from a
-        # wrong start (a jump of centimetres); it got from the start to the target.
-        assert len(path) > 50 and distance_to_segment(np.array(path), start[:3, 3], target[:3, 3]).max() < 1e-3
+        # estimate), and far below a line planned from a wrong start (a jump of centimetres); it
+        # got from the start to the target. A loop that ran late, or this busy process's
+        # hardware taking a command late, holds the previous command on for that long: the
+        # nodes' worst lateness and the hardware's longest step, times the line's speed, are
+        # added (1.2 mm seen on a loaded machine).
+        lateness_s = 1e-3 * sum(
+            float(client.wait_status(name).values["loop_period_error_max_ms"])
+            for name in ("cartesian_controller", "trajectory_generator")
+        )
+        lateness_s += float(np.max(np.diff(hardware.history_times[first_step:])))
+        bound = 1e-3 + 0.05 * lateness_s
+        deviation = distance_to_segment(np.array(path), start[:3, 3], target[:3, 3]).max()
+        assert len(path) > 50 and deviation < bound, (deviation, bound)
         assert np.linalg.norm(path[0] - start[:3, 3]) < 2e-4 and np.linalg.norm(path[-1] - target[:3, 3]) < 2e-4
     finally:
         codes = pipeline.stop()
