@@ -79,32 +79,28 @@ def _series(messages, after_ns=0):
     return stamps[keep], positions, velocities
 
 
-def _at_start(pipeline) -> None:
-    """The arm at Q_START, as the module's pipeline starts it: a rerun finds it where the
-    failed run left it (robot_state's joint_states are in the model's order here)."""
+def _move_to(pipeline, q, tolerance: float) -> None:
+    """The arm within ``tolerance`` of ``q`` before a test moves it: a rerun finds it where
+    the failed run left it (robot_state's joint_states are in the model's order here)."""
     client = pipeline.client()
     try:
-        _move_to_start(pipeline, client)
+        if np.abs(client.current_positions() - q).max() > tolerance:
+            moved = subprocess.run(
+                [MANIP_KIN, "move", "--q", *map(str, q), "--wait"],
+                env=pipeline.env,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
+            assert moved.returncode == 0, moved.stderr
+            # Converged within joint_tolerance (1 mrad); the controller takes it on from there.
+            assert client.spin_until(lambda: np.abs(client.current_positions() - q).max() <= tolerance, 10)
     finally:
         client.unwatch_state()  # two 500 Hz readers that would cost this process CPU in the move
 
 
-def _move_to_start(pipeline, client) -> None:
-    if np.abs(client.current_positions() - Q_START).max() > 1e-7:
-        back = subprocess.run(
-            [MANIP_KIN, "move", "--q", *map(str, Q_START), "--wait"],
-            env=pipeline.env,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-        assert back.returncode == 0, back.stderr
-        # Converged within joint_tolerance (1 mrad); the controller takes it on from there.
-        assert client.spin_until(lambda: np.abs(client.current_positions() - Q_START).max() <= 1e-7, 10)
-
-
 def test_scara_cubic_joint_move_follows_s_of_tau(scara):
-    _at_start(scara)
+    _move_to(scara, Q_START, 1e-7)
     result, recorded = _run_recording(
         scara,
         ["move", "--q", *map(str, Q_GOAL), "--duration", str(DURATION), "--time-scaling", "cubic", "--wait", "--json"],
@@ -118,7 +114,7 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     # time a reference is for), the same clock as robot_state's joint_states.
     ref_stamps, ref_positions, ref_velocities = _series(recorded["joint_reference"])
     t0 = ref_stamps[0]
-    np.testing.assert_allclose(ref_positions[0], Q_START, atol=1e-6)  # where the arm is (1e-7: see _at_start)
+    np.testing.assert_allclose(ref_positions[0], Q_START, atol=1e-6)  # where the arm is (1e-7: see _move_to)
     stamps, positions, velocities = _series(recorded["joint_states"], after_ns=t0 - 200_000_000)
     t = (stamps - t0) * 1e-9
     tau = np.clip(t / DURATION, 0.0, 1.0)
@@ -154,7 +150,10 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     assert timing_error.max() <= peak_rate * (LATENCY + max(lateness_s, 0.1)) + 1e-3, (timing_error.max(), lateness_s)
     peak_speed = peak_rate * np.abs(Q_GOAL - Q_START)
     worst = deviation.max(axis=0)
-    assert len(t[(t > 0) & (t < DURATION)]) > 0.5 * 500 * DURATION  # the whole move was observed
+    # The whole move was observed: states in each tenth of it. (Not a count: that is the rate
+    # this client takes them at, which a loaded machine lowers: 414 of 1000 seen.)
+    observed = np.unique((t[(t >= 0) & (t < DURATION)] / DURATION * 10).astype(int))
+    assert observed.tolist() == list(range(10)), observed
     # At rest at both ends: the reference's velocity is exactly zero at t = 0 and t = T; the
     # arm's rate is ~0 before the start and within 2 ms after it (the cubic's own rate there
     # is < 0.005 rad/s), and at the end it is the controller's correction K·e, at most
@@ -177,6 +176,7 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
 
 
 def test_move_back_quintic_with_automatic_duration_and_bad_input(scara):
+    _move_to(scara, Q_GOAL, 1e-3)  # where the first test leaves it
     result = subprocess.run(
         [MANIP_KIN, "move", "--q", "0", "0", "0", "0", "--time-scaling", "quintic", "--wait", "--json"],
         env=scara.env,
