@@ -108,7 +108,7 @@ def _check_the_line(irb120, client, samples, start, end):
     assert converged, status.values if status else None
     # The statuses can be handled ahead of a backlog of queued poses (one callback per spin):
     # take the queued poses until one at the end point has been handled. (A wait, not a bound:
-    # beside the SCHED_FIFO nodes this client was starved of the CPU for over 20 s once.)
+    # beside the SCHED_FIFO nodes this client had not taken its queue to the end in 20 s once.)
     assert client.spin_until(lambda: np.linalg.norm(samples[-1][:3, 3] - end) < 5e-4, 60), samples[-1][:3, 3]
     poses = np.array(samples)
     deviation = distance_to_segment(poses[:, :3, 3], start, end)
