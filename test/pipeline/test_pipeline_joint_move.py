@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pipeline_checks import loops_lateness_s
 from sensor_msgs.msg import JointState
 
 from manip_kin.pipeline import Pipeline, fresh_domain_env, pipeline_processes
@@ -139,10 +140,7 @@ def test_scara_cubic_joint_move_follows_s_of_tau(scara):
     # Python loop waits for the GIL even at SCHED_FIFO): the median must be on time, every
     # sample within the on-time bound plus the nodes' own worst loop lateness, or 100 ms.
     client = scara.client()
-    lateness_s = 1e-3 * sum(
-        float(client.wait_status(name).values["loop_period_error_max_ms"])
-        for name in ("robot_state", "cartesian_controller", "trajectory_generator")
-    )
+    lateness_s = loops_lateness_s(client)
     peak_rate = 1.5 / DURATION
     timing_error = np.abs(sigma - s)
     on_time = peak_rate * LATENCY + 1e-3

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from pipeline_checks import fast_dds_receive_threads, realtime_scheduling_error, stop_checked
+from pipeline_checks import fast_dds_receive_threads, loops_lateness_s, realtime_scheduling_error, stop_checked
 
 from manip_kin.core.rotations import make_transform, rpy_to_matrix
 from manip_kin.motion.lines import distance_to_segment
@@ -124,10 +124,7 @@ def _check_the_line(irb120, client, samples, start, end):
     # a path bent by joint-space interpolation or a missing feed-forward gives centimetres.
     # A loop that ran late (no SCHED_FIFO) carries the previous command on for that long: its
     # worst lateness times the line speed is added, read from the nodes' own loop statistics.
-    lateness_s = 1e-3 * sum(
-        float(client.wait_status(name).values["loop_period_error_max_ms"])
-        for name in ("robot_state", "cartesian_controller", "trajectory_generator")
-    )
+    lateness_s = loops_lateness_s(client)
     bound = 6e-3 + 0.4 * lateness_s
     assert deviation.max() < bound, (deviation.max(), bound, REALTIME_ERROR or "SCHED_FIFO")
     # Converged: the tool is on the end point (fresh poses: the samples above can lag behind).

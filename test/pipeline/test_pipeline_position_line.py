@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
+from pipeline_checks import loops_lateness_s
 
 from manip_kin.motion.lines import distance_to_segment
 from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, fresh_domain_env, pipeline_processes
@@ -108,10 +109,7 @@ def test_position_only_line_at_constant_speed(irb120):
     # a path bent by the reach check or the controller would show centimetres. A loop that
     # ran late carries the previous command on for that long: the nodes' own worst lateness
     # (their loop statistics) times the speed is added, as a loaded machine makes them late.
-    lateness_s = 1e-3 * sum(
-        float(client.wait_status(name).values["loop_period_error_max_ms"])
-        for name in ("robot_state", "cartesian_controller", "trajectory_generator")
-    )
+    lateness_s = loops_lateness_s(client)
     deviation = distance_to_segment(positions, START, END)
     assert deviation[moving].max() < 2e-3 + SPEED * lateness_s, (deviation[moving].max(), lateness_s)
     # At the ends the line ramps (within the joint acceleration limits); the loop's lag there

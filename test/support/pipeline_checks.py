@@ -10,6 +10,15 @@ from pathlib import Path
 
 from manip_kin.pipeline import Pipeline
 
+#: The nodes of a pipeline whose loops carry a motion.
+PIPELINE_NODES = ("robot_state", "cartesian_controller", "trajectory_generator")
+
+
+def loops_lateness_s(client, names=PIPELINE_NODES) -> float:
+    """The sum of the named nodes' worst loop lateness so far [s], from their newest status
+    (``loop_period_error_max_ms``): how long a late cycle can have held a command on."""
+    return 1e-3 * sum(float(client.wait_status(name).values["loop_period_error_max_ms"]) for name in names)
+
 
 def stop_checked(pipeline: Pipeline) -> None:
     """Stop every node; each must exit with 0 (a node that crashed or hung is a failure)."""

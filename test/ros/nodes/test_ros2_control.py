@@ -14,6 +14,7 @@ import re
 import numpy as np
 import pytest
 from fake_hardware import COMMAND_TOPIC, FakeHardware, urdf_arm_joints
+from pipeline_checks import loops_lateness_s
 from robot_data_files import UR5, example_robot_data_urdf
 
 from manip_kin.core.kinematics import frame_pose
@@ -103,10 +104,7 @@ def test_controller_drives_a_ros2_control_arm_from_robot_description(ur5_text, t
         # hardware taking a command late, holds the previous command on for that long: the
         # nodes' worst lateness and the hardware's longest step, times the line's speed, are
         # added (1.2 mm seen on a loaded machine).
-        lateness_s = 1e-3 * sum(
-            float(client.wait_status(name).values["loop_period_error_max_ms"])
-            for name in ("cartesian_controller", "trajectory_generator")
-        )
+        lateness_s = loops_lateness_s(client, ("cartesian_controller", "trajectory_generator"))
         lateness_s += float(np.max(np.diff(hardware.history_times[first_step:])))
         bound = 1e-3 + 0.05 * lateness_s
         deviation = distance_to_segment(np.array(path), start[:3, 3], target[:3, 3]).max()
