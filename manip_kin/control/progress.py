@@ -22,6 +22,12 @@ class ProgressMonitor:
     It also keeps the joints limited at every step of the window (:attr:`limited_throughout`,
     of the window that ended last): a joint on its limit stays limited, while a singular arm's
     rates swing wide enough to hold a joint for a cycle far from its limit (seen: 0.6 rad).
+
+    The first window after a restart starts once the commands follow the law's rates: while
+    they still ramp up within the acceleration and jerk limits, the arm moves too little to
+    judge (seen: a goal 3 m away, joint1 at 2 rad/s², found unreachable after 0.5 s). It starts
+    one window after the first step at the latest, as at a singularity the law's rates can
+    change faster than the commands follow, for as long as the arm stays there.
     """
 
     def __init__(self, window_ns: int):
@@ -31,17 +37,27 @@ class ProgressMonitor:
     def restart(self) -> None:
         """Forget the history (a new goal, a moving goal, a resumed motion)."""
         self._start_ns: int | None = None
+        self._first_ns: int | None = None
         self._start_errors = (0.0, 0.0)
         self._limited: set[int] = set()
         self.limited_throughout: tuple[int, ...] = ()
 
     def stalled(
-        self, now_ns: int, errors: tuple[float, float], tolerances: tuple[float, float], limited: Sequence[int] = ()
+        self,
+        now_ns: int,
+        errors: tuple[float, float],
+        tolerances: tuple[float, float],
+        limited: Sequence[int] = (),
+        ramping: bool = False,
     ) -> bool:
         """True when the window that ends now made no progress (then a new window starts).
-        ``limited``: the joints limited at this step."""
+        ``limited``: the joints limited at this step; ``ramping``: the commands still ramp
+        towards the law's rates (held back by the acceleration or jerk limits)."""
         if self._start_ns is None:
-            self._start_ns, self._start_errors, self._limited = now_ns, errors, set(limited)
+            if self._first_ns is None:
+                self._first_ns = now_ns
+            if not ramping or now_ns - self._first_ns >= self.window_ns:
+                self._start_ns, self._start_errors, self._limited = now_ns, errors, set(limited)
             return False
         self._limited.intersection_update(limited)
         if now_ns - self._start_ns < self.window_ns:

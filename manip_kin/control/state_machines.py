@@ -253,13 +253,20 @@ class ControllerSupervisor:
         self._set(ControllerState.STALE_INPUT, f"control step failed: {error}")
 
     def pose_step_done(
-        self, output: PoseStepOutput, feed_forward_used: bool, now_ns: int, braking_joints: Sequence[int] = ()
+        self,
+        output: PoseStepOutput,
+        feed_forward_used: bool,
+        now_ns: int,
+        braking_joints: Sequence[int] = (),
+        ramping: bool = False,
     ) -> None:
         """Classify a pose step. Converged only while the goal is not moving (no feed-forward
         motion), counting the task's error components only. A resting goal whose error stops
         falling (:class:`ProgressMonitor`) while the arm is singular or at joint limits (held
         by the law, or braked before one: ``braking_joints``, at every step of the window) is
-        unreachable."""
+        unreachable. ``ramping``: the commands still ramp towards the law's rates (last cycle's
+        command was not the law's: held back by the limits, or at rest); the progress is judged
+        from when they follow."""
         orientation_error, position_error = self.config.task.error_norms(
             output.orientation_error, output.position_error
         )
@@ -276,7 +283,7 @@ class ControllerSupervisor:
         elif goal_moving:
             self.progress.restart()
             self._classify_limits(limited, "moving towards the goal")
-        elif self.progress.stalled(now_ns, (position_error, orientation_error), tolerances, limited) and (
+        elif self.progress.stalled(now_ns, (position_error, orientation_error), tolerances, limited, ramping) and (
             output.singular or self.progress.limited_throughout
         ):
             self.unreachable_errors = (position_error, orientation_error)

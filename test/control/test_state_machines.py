@@ -199,6 +199,28 @@ def test_an_unreachable_goal_names_the_limits_held_all_along_else_the_singularit
     assert _stalled([((), {}), ((), {}), ((2,), {})])[0] is not unreachable
 
 
+def test_the_first_window_waits_for_the_commands_to_ramp_up_but_one_window_at_most():
+    """A goal's error stays put while the commands still ramp towards the law's rates (a joint
+    limited all along): judged only from when they follow, or one window after the first step."""
+    window_ns = int(_controller().config.progress_window * 1e9)
+
+    def state_at(end_ns, ramping_until_ns):
+        supervisor = _controller()
+        for now_ns in range(0, end_ns + 1, window_ns // 10):
+            output = _pose_output(position=(0.1, 0, 0), limited=(1,))
+            supervisor.pose_step_done(output, False, now_ns, ramping=now_ns < ramping_until_ns)
+        return supervisor.state
+
+    unreachable = ControllerState.UNREACHABLE
+    assert state_at(window_ns, ramping_until_ns=0) is unreachable  # following from the start
+    # Ramping for 0.4 windows: the first window starts there and has not ended at 1 window.
+    assert state_at(window_ns, ramping_until_ns=4 * window_ns // 10) is not unreachable
+    assert state_at(14 * window_ns // 10, ramping_until_ns=4 * window_ns // 10) is unreachable
+    # Ramping all along (rates that swing faster than the commands follow): judged one window late.
+    assert state_at(19 * window_ns // 10, ramping_until_ns=10 * window_ns) is not unreachable
+    assert state_at(2 * window_ns, ramping_until_ns=10 * window_ns) is unreachable
+
+
 def test_step_failure_is_stale_input():
     supervisor = _controller()
     supervisor.step_failed(ValueError("q contains NaN"))

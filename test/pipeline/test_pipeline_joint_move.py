@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pipeline_checks import loops_lateness_s
+from pipeline_checks import loops_lateness_s, realtime_measurement
 from sensor_msgs.msg import JointState
 
 from manip_kin.pipeline import Pipeline, fresh_domain_env, pipeline_processes
@@ -48,22 +48,23 @@ def _run_recording(pipeline, args, topics=("joint_states", "joint_reference"), t
         client.node.create_subscription(JointState, topic, recorded[topic].append, 1000) for topic in topics
     ]
     try:
-        client.spin_for(0.2)
-        process = subprocess.Popen(
-            [MANIP_KIN, *args], env=pipeline.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
-        client.spin_until(lambda: process.poll() is not None, timeout)
-        stdout, stderr = process.communicate(timeout=5)
-        # Drain what is queued: the client takes one message a spin, and under load a backlog of
-        # both streams outlasts a fixed wait (the last reference taken was then mid-move). The
-        # move's stream has ended once its count stays put (joint_states never ends).
-        streams = [recorded[topic] for topic in topics if topic != "joint_states"]
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:
-            counts = [len(messages) for messages in streams]
-            client.spin_for(0.3)
-            if counts == [len(messages) for messages in streams]:
-                break
+        with realtime_measurement():
+            client.spin_for(0.2)
+            process = subprocess.Popen(
+                [MANIP_KIN, *args], env=pipeline.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+            )
+            client.spin_until(lambda: process.poll() is not None, timeout)
+            stdout, stderr = process.communicate(timeout=5)
+            # Drain what is queued: the client takes one message a spin, and under load a backlog
+            # of both streams outlasts a fixed wait (the last reference taken was then mid-move).
+            # The move's stream has ended once its count stays put (joint_states never ends).
+            streams = [recorded[topic] for topic in topics if topic != "joint_states"]
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline:
+                counts = [len(messages) for messages in streams]
+                client.spin_for(0.3)
+                if counts == [len(messages) for messages in streams]:
+                    break
     finally:
         for subscription in subscriptions:
             client.node.destroy_subscription(subscription)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from pipeline_checks import loops_lateness_s
+from pipeline_checks import loops_lateness_s, realtime_measurement
 
 from manip_kin.motion.lines import distance_to_segment
 from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, fresh_domain_env, pipeline_processes
@@ -55,20 +55,22 @@ def test_position_only_line_at_constant_speed(irb120):
     assert report["position_only"] and report["converged"] and report["final_error"]["position"] <= 1e-4
     client = irb120.client()
     samples = []
-    subscription = client.node.create_subscription(PoseStamped, "tool_pose", samples.append, 1000)
-    client.spin_for(0.2)
-    line = subprocess.Popen(
-        [MANIP_KIN, "line", "--xyz", *map(str, END), "--wait", "--json", "--timeout", "30"],
-        env=irb120.env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    client.spin_until(lambda: line.poll() is not None, 60)
-    stdout, stderr = line.communicate(timeout=5)
-    # The client takes one message a spin: under load its queue still holds the line's end
-    # when the CLI is done (the last pose taken was once 13 cm short). Take it up to there.
-    client.spin_until(lambda: samples and np.linalg.norm(_xyz(samples[-1]) - END) < 2e-4, 60)
+    # Deep: a loaded client can fall seconds behind 500 poses a second.
+    subscription = client.node.create_subscription(PoseStamped, "tool_pose", samples.append, 20000)
+    with realtime_measurement():
+        client.spin_for(0.2)
+        line = subprocess.Popen(
+            [MANIP_KIN, "line", "--xyz", *map(str, END), "--wait", "--json", "--timeout", "30"],
+            env=irb120.env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        client.spin_until(lambda: line.poll() is not None, 60)
+        stdout, stderr = line.communicate(timeout=5)
+        # The client takes one message a spin: under load its queue still holds the line's end
+        # when the CLI is done (the last pose taken was once 13 cm short). Take it up to there.
+        client.spin_until(lambda: samples and np.linalg.norm(_xyz(samples[-1]) - END) < 2e-4, 60)
     client.node.destroy_subscription(subscription)
     assert line.returncode == 0, stderr
     report = json.loads(stdout)

@@ -79,3 +79,25 @@ def fast_dds_receive_threads(pid: int | str = "self") -> list[int]:
         for task in Path(f"/proc/{pid}/task").iterdir()
         if re.fullmatch(r"dds\.(shm|udp)\.\d+", (task / "comm").read_text().strip())
     ]
+
+
+@contextlib.contextmanager
+def realtime_measurement(priority: int = 5):
+    """Run this process's thread and its middleware receive threads at SCHED_FIFO ``priority``
+    (below the nodes' 10) for the body, where permitted: a test that takes a 500 Hz stream is
+    an instrument that must keep up. At normal scheduling, beside the SCHED_FIFO nodes and a
+    second test worker, it fell seconds behind and lost a line's cruise (54 of 600 poses kept).
+    Child processes (the CLI) start at normal scheduling, as a user's would."""
+    from manip_kin.ros.runtime.scheduling import share_realtime_priority
+
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
+    except OSError:  # refused: measured at normal scheduling, as before
+        yield
+        return
+    shared = share_realtime_priority(priority)
+    try:
+        yield
+    finally:
+        shared.restore()
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

@@ -22,7 +22,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64MultiArray
 
-from manip_kin.control.command_filter import CommandFilter
+from manip_kin.control.command_filter import CommandFilter, FilterResult
 from manip_kin.control.joint_tracking import JointTrackingOutput, joint_tracking_step
 from manip_kin.control.resolved_rate import ControlOutput
 from manip_kin.control.state_machines import (
@@ -280,7 +280,9 @@ class CartesianControllerNode(LoopingNode):
                     output = self.law.step(q, goal, twist, self.limit_horizon)
                     self.output = output
                     target = output.qdot
-                    supervisor.pose_step_done(output, twist_fresh, now_ns, self.command_filter.braking_joints)
+                    command_filter = self.command_filter
+                    ramping = command_filter.result is not FilterResult.FOLLOWING  # at rest: from rest
+                    supervisor.pose_step_done(output, twist_fresh, now_ns, command_filter.braking_joints, ramping)
                     supervisor.collision_blocked(self.collision.pose_step_done(output, now_ns))
             except ManipKinError as error:
                 target = self._zeros
