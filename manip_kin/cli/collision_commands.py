@@ -7,7 +7,9 @@ pair in contact, 1 the configuration collides, 2 bad input.
 ``obstacle add|delete|clear`` publishes one ``visualization_msgs/MarkerArray`` on
 ``collision_objects`` (in ``--namespace``) once a subscriber (a controller, the physics plant,
 a recorder) is matched, and waits until it acknowledged the message, so it is delivered when
-the command returns.
+the command returns. ``--frame`` defaults to the base frame the controller reports. When the
+namespace's cartesian_controller listens (it has ``collision_avoidance``), its status says
+whether it took the array: exit 0 taken, 2 refused (with its reason), 1 no word of it.
 """
 
 from __future__ import annotations
@@ -67,7 +69,9 @@ def register(subparsers) -> None:
         description="Publish boxes, spheres and cylinders (visualization_msgs/MarkerArray in the base frame) on "
         "collision_objects for the controller's collision avoidance. A marker's --ns and --id name an obstacle; "
         "add replaces one with the same name. Sizes follow the markers: a box's full extents, a sphere's "
-        "diameter, a cylinder's diameter and height (along its z). Example: "
+        "diameter, a cylinder's diameter and height (along its z). A collision-aware controller's verdict is the "
+        "command's: exit 0 taken (or no such controller listens), 2 refused (its reason printed), bad input or "
+        "no subscriber, 1 no word from the controller within --timeout. Example: "
         "manip_kin obstacle add --id 1 --shape box --size 0.2 0.2 0.4 --xyz 0.5 0 0.2",
     )
     actions = obstacle.add_subparsers(dest="action", metavar="ACTION", parser_class=type(obstacle))
@@ -91,7 +95,12 @@ def register(subparsers) -> None:
     _add_key_arguments(delete)
     clear = actions.add_parser("clear", help="remove every obstacle")
     for parser in (add, delete, clear):
-        parser.add_argument("--frame", default="base_link", help="base frame id of the robot (default base_link)")
+        parser.add_argument(
+            "--frame",
+            default=None,
+            help="frame_id of the obstacle: the robot's base frame (default: the one the controller "
+            "reports, else base_link)",
+        )
         parser.add_argument("--timeout", type=float, default=10.0, metavar="S", help="seconds to wait for a subscriber")
         add_namespace_argument(parser)
         add_json_argument(parser)
@@ -169,8 +178,8 @@ def _obstacle_scale(shape: str, size: list[float]) -> tuple[float, float, float]
     return (size[0], size[0], size[1])
 
 
-def build_marker_array(args: argparse.Namespace, stamp):
-    """The ``MarkerArray`` of an ``obstacle`` command (checked like the controller will)."""
+def build_marker_array(args: argparse.Namespace, frame: str, stamp):
+    """The ``MarkerArray`` of an ``obstacle`` command in ``frame`` (checked like the controller will)."""
     from visualization_msgs.msg import Marker, MarkerArray
 
     from manip_kin.core.rotations import make_transform, rpy_to_matrix
@@ -178,7 +187,7 @@ def build_marker_array(args: argparse.Namespace, stamp):
     from manip_kin.ros.wire.messages import fill_pose
 
     marker = Marker()
-    marker.header.frame_id = args.frame
+    marker.header.frame_id = frame
     marker.header.stamp = stamp
     if args.action == "clear":
         marker.action = int(MarkerAction.DELETEALL)
@@ -198,9 +207,41 @@ def build_marker_array(args: argparse.Namespace, stamp):
     return MarkerArray(markers=[marker])
 
 
+def _controller_listens(client, topic: str, timeout: float) -> bool:
+    """True when this namespace's cartesian_controller subscribes ``topic`` (it has
+    ``collision_avoidance``, and reports what it took of the scene). A subscription's node is
+    learnt after the subscription itself (Fast DDS: "_NODE_NAME_UNKNOWN_" until then): waited
+    for, up to ``timeout``."""
+    controller = client.status_name("cartesian_controller")
+
+    def names():
+        infos = client.node.get_subscriptions_info_by_topic(topic)
+        known = [f"{info.node_namespace.rstrip('/')}/{info.node_name}".lstrip("/") for info in infos]
+        return None if any("_NODE_NAME_UNKNOWN_" in name for name in known) else known
+
+    return controller in (client.spin_until(names, timeout) or ())
+
+
+def _verdict(client, stamp: str, timeout: float):
+    """The controller's status that took the array stamped ``stamp`` (None: none within ``timeout``)."""
+
+    def taken():
+        status = client.latest_status("cartesian_controller")
+        return (
+            status is not None
+            and stamp in (status.values.get("obstacles_stamp"), status.values.get("rejected_obstacles_stamp"))
+            and status
+        )
+
+    return client.spin_until(taken, timeout)
+
+
 def run_obstacle(args: argparse.Namespace) -> int:
     """``manip_kin obstacle add|delete|clear``."""
+    from visualization_msgs.msg import MarkerArray
+
     from manip_kin.pipeline import PipelineClient, PipelineError
+    from manip_kin.ros.wire.messages import stamp_key
     from manip_kin.ros.wire.scene_messages import TOPIC
 
     if not args.timeout > 0:
@@ -208,17 +249,40 @@ def run_obstacle(args: argparse.Namespace) -> int:
     namespace = namespace_from_args(args)
     if args.action == "add":
         _obstacle_scale(args.shape, args.size)  # bad input fails before any ROS start-up
-    with PipelineClient(watch_state=False, base_frame=args.frame, namespace=namespace) as client:
-        msg = build_marker_array(args, client.node.get_clock().now().to_msg())
+    what = "every obstacle" if args.action == "clear" else f"obstacle {args.ns}/{args.id}"
+    with PipelineClient(watch_state=False, namespace=namespace) as client:
+        topic = client.topic(TOPIC)
         try:
-            subscribers = client.publish_delivered(TOPIC, msg, args.timeout)
+            client.wait_subscribers(MarkerArray, TOPIC, args.timeout, latched=True)
+            listens = _controller_listens(client, topic, args.timeout)
+            frame = args.frame
+            if frame is None:
+                reported = client.wait_status("cartesian_controller", args.timeout) if listens else None
+                frame = (reported.values.get("base_frame") if reported else None) or "base_link"
+            stamp = client.node.get_clock().now().to_msg()
+            subscribers = client.publish_delivered(TOPIC, build_marker_array(args, frame, stamp), args.timeout)
         except PipelineError as error:
             print(f"manip_kin obstacle: error: {error}", file=sys.stderr)
             return 2
-        topic = client.topic(TOPIC)
-    what = "every obstacle" if args.action == "clear" else f"obstacle {args.ns}/{args.id}"
-    if args.json:
-        print_json({"topic": topic, "action": args.action, "ns": getattr(args, "ns", ""), "subscribers": subscribers})
+        verdict = _verdict(client, stamp_key(stamp), args.timeout) if listens else None
+    report = {"topic": topic, "action": args.action, "ns": getattr(args, "ns", ""), "frame": frame}
+    report["subscribers"] = subscribers
+    if not listens:
+        report["controller"], outcome = "not listening", "no controller with collision_avoidance listens"
+    elif verdict is None:
+        report["controller"] = "no report"
+        outcome = f"the controller reported nothing of it within {args.timeout:g} s"
+    elif verdict.values.get("rejected_obstacles_stamp") == stamp_key(stamp):
+        report["controller"], report["reason"] = "refused", verdict.values.get("last_obstacle_rejection", "")
+        outcome = f"refused by the controller: {report['reason']}"
     else:
-        print(f"{args.action} {what}: delivered on {topic} to {subscribers} subscriber(s)")
+        report["controller"] = "taken"
+        outcome = f"taken by the controller ({verdict.values.get('obstacles', '?')} obstacles)"
+    if args.json:
+        print_json(report)
+    if report["controller"] in ("refused", "no report"):
+        print(f"manip_kin obstacle: error: {what} delivered on {topic}, {outcome}", file=sys.stderr)
+        return 2 if report["controller"] == "refused" else 1
+    if not args.json:
+        print(f"{args.action} {what}: delivered on {topic} to {subscribers} subscriber(s), {outcome}")
     return 0

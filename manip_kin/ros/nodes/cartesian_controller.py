@@ -250,7 +250,7 @@ class CartesianControllerNode(LoopingNode):
         if self._halting:  # halt() owns the command stream now
             return
         self._take_inputs(now_ns)
-        self.collision.take()
+        self._report_now = self.collision.take() or self._report_now  # the scene's verdict at once
         self._report_now = self.requests.take(self.supervisor) or self._report_now
         supervisor = self.supervisor
         target = self._zeros

@@ -42,7 +42,7 @@ from manip_kin.control.qp.law import QpConfig, QpController, QpJointOutput, QpOu
 from manip_kin.control.qp.tasks import PostureTask
 from manip_kin.control.resolved_rate import CartesianController
 from manip_kin.core.scene import Scene
-from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_model
+from manip_kin.ros.nodes.scene_input import SCENE_VERDICT_KEYS, SceneInput, node_collision_model
 from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Seconds of pose (or joint) steps :func:`blocked_by` looks at, and how often it looks [ns].
@@ -168,10 +168,10 @@ class CollisionInputs:
 
     # --- each cycle -----------------------------------------------------------------------------
 
-    def take(self) -> None:
-        """Apply the queued ``collision_objects`` (see :class:`~manip_kin.ros.nodes.scene_input.SceneInput`)."""
-        if self.scene_input is not None:
-            self.scene_input.take()
+    def take(self) -> bool:
+        """Apply the queued ``collision_objects`` (see :class:`~manip_kin.ros.nodes.scene_input.SceneInput`);
+        True when an array was taken."""
+        return self.scene_input is not None and self.scene_input.take()
 
     def pose_step_done(self, output, now_ns: int) -> Blocked | None:
         """Keep a pose step's output; every ~50 ms, the blocking pair over the last 0.3 s, if any
@@ -220,10 +220,10 @@ class CollisionInputs:
     def report(self, stamp, output) -> list[tuple[str, str]]:
         """The ``/diagnostics`` values of the last step's ``output`` (empty strings without the QP
         law), and the nearest pair's marker on ``markers`` (deleted once no pair is near any more)."""
-        scene = [
-            ("obstacles", str(len(self.scene))),
-            ("rejected_obstacles", str(self.scene_input.refused if self.scene_input is not None else 0)),
-        ]
+        if self.scene_input is not None:
+            scene = self.scene_input.report()
+        else:  # no scene is taken: the same keys, nothing in them
+            scene = [("obstacles", "0"), ("rejected_obstacles", "0")] + [(key, "") for key in SCENE_VERDICT_KEYS]
         if self.law is None or not isinstance(output, QpReport):
             keys = ("nearest_pair", "nearest_distance", "nearest_points", "qp_status", "qp_fallbacks")
             return [(key, "") for key in (*keys, "active_constraints", "collision_safety_distance")] + scene

@@ -23,6 +23,7 @@ from manip_kin.core.scene import Scene
 from manip_kin.errors import InvalidArgumentError
 from manip_kin.ros.runtime.param_struct import ParamStruct
 from manip_kin.ros.runtime.polling import PolledSubscription
+from manip_kin.ros.wire.messages import stamp_key
 from manip_kin.ros.wire.scene_messages import TOPIC, apply_marker_array
 
 #: Queued ``collision_objects`` arrays kept for the loop (markers are incremental: keep them all).
@@ -31,6 +32,8 @@ SCENE_DEPTH = 50
 #: an empty poll in a 1 kHz loop cost the collision-aware controller 5 % of its cycle (its
 #: caches are cold between cycles). 10 ms leaves room for SCENE_DEPTH arrays per poll.
 SCENE_POLL_NS = 10_000_000
+#: The ``/diagnostics`` keys of a scene's verdict (:meth:`SceneInput.report`).
+SCENE_VERDICT_KEYS = ("obstacles_stamp", "rejected_obstacles_stamp", "last_obstacle_rejection")
 
 
 def robot_urdf(params: ParamStruct, description_text: str | None, feature: str) -> str | Path:
@@ -79,7 +82,13 @@ class SceneInput:
         self.node = node
         self.checker = checker
         self.scene = Scene()
+        #: Markers refused so far.
         self.refused = 0
+        #: The stamp (:func:`~manip_kin.ros.wire.messages.stamp_key`) of the newest array taken,
+        #: of its first marker; and of the newest array with a marker refused, with the reasons.
+        self.taken_stamp = ""
+        self.refused_stamp = ""
+        self.last_refusal = ""
         self._warn = warn
         self.subscription = PolledSubscription(node, MarkerArray, TOPIC, SCENE_DEPTH)
         self._next_poll_ns = 0
@@ -89,17 +98,30 @@ class SceneInput:
         """The resolved topic name."""
         return self.subscription.subscription.topic_name
 
-    def take(self) -> None:
+    def take(self) -> bool:
         """Every :data:`SCENE_POLL_NS`: apply every queued array in order; the checker takes the
-        scene if it changed."""
+        scene if it changed. True when an array was taken (its verdict is news to report)."""
         now_ns = time.monotonic_ns()
         if now_ns < self._next_poll_ns:
-            return
+            return False
         self._next_poll_ns = now_ns + SCENE_POLL_NS
+        taken = False
         while (msg := self.subscription.take()) is not None:
+            taken = True
+            stamp = stamp_key(msg.markers[0].header.stamp) if msg.markers else ""
+            self.taken_stamp = stamp
             problems = apply_marker_array(self.scene, msg, self.node.base_frame)
             if problems:
                 self.refused += len(problems)
-                self._warn("collision_objects", f"refused on {self.topic}: {'; '.join(problems)[:400]}")
+                self.refused_stamp, self.last_refusal = stamp, "; ".join(problems)[:400]
+                self._warn("collision_objects", f"refused on {self.topic}: {self.last_refusal}")
         if self.checker.update_scene(self.scene) and self.checker.scene_problems:
             self._warn("collision_scene", f"obstacles left out: {'; '.join(self.checker.scene_problems)[:400]}")
+        return taken
+
+    def report(self) -> list[tuple[str, str]]:
+        """The scene's ``/diagnostics`` values: what was taken and what refused, and why."""
+        verdict = (self.taken_stamp, self.refused_stamp, self.last_refusal)
+        return [("obstacles", str(len(self.scene))), ("rejected_obstacles", str(self.refused))] + list(
+            zip(SCENE_VERDICT_KEYS, verdict)
+        )
