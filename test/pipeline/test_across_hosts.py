@@ -52,7 +52,7 @@ def run(tmp_path_factory):
             _, stderr = driver.communicate()
     assert driver.returncode == 0, stderr[-3000:]
     result = json.loads((out / "result.json").read_text())
-    assert result["reached_line_start"] and all(result["alive"].values()), result
+    assert result["recorder_matched"] and result["reached_line_start"] and all(result["alive"].values()), result
     return result
 
 
@@ -108,6 +108,7 @@ def test_the_commands_halt_within_the_limits_on_the_stale_state(run):
     assert_stream_within(commands, JointLimits.of(model), 1.0 / RATE, from_rest=False, context=recorder)
     down, up = run["link_down_wall_ns"], run["link_up_wall_ns"]
     before = commands[(times > down - 2e8) & (times < down)]
+    assert before.size, f"no command recorded in the 0.2 s before the link went down{recorder}"
     assert np.abs(before).max() > 0.01  # moving when the link went down
     outage = commands[(times > down) & (times < up)]
     halted = np.flatnonzero(~np.any(outage, axis=1))
