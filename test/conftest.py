@@ -5,6 +5,7 @@ pytest, and every subprocess a test starts, inherits the same isolated domain.
 """
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -69,6 +70,22 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.flaky(reruns=1))
         serial = any(relative.startswith(prefix) for prefix in SERIAL_PIPELINES)
         item.add_marker(pytest.mark.xdist_group("serial_pipelines" if serial else relative))
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Why each rerun test failed first: its error lines, so a run (CI's too) shows what a
+    rerun hid, not just that one happened."""
+    reruns = terminalreporter.stats.get("rerun", [])
+    if not reruns:
+        return
+    terminalreporter.section("why the reruns failed at first")
+    for report in reruns:
+        lines = report.longreprtext.strip().splitlines()
+        errors = [line for line in lines if line.startswith("E ")][:6]
+        where = [line for line in lines if re.match(r"^\S+\.py:\d+: ", line)][-1:]
+        terminalreporter.write_line(f"{report.nodeid}")
+        for line in errors + where:
+            terminalreporter.write_line(f"    {line[:300]}")
 
 
 @dataclass(frozen=True)
