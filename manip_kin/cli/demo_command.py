@@ -207,7 +207,7 @@ def _run_live(args, model, q0, goal_pose, start_pose) -> int:
                     continue
                 stamp = generator.values.get("final_goal_stamp", stamp)
             converged, status = client.wait_converged(stamp, timeout=args.timeout)
-            took = client.time_to_converge(stamp, started)
+            took = client.time_to_converge(stamp, started, sent_stamp=sent_stamp)
             timing = motion_timing(
                 sent_stamp, status.values if status else {}, generator.values if generator is not None else None
             )

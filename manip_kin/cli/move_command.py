@@ -198,7 +198,7 @@ def _await(args, client, stamp: str, start: float, payload: dict, summary: str) 
         return 1
     remaining = max(args.timeout - (time.monotonic() - start), 0.1)
     converged, status = client.wait_converged(generator.values["final_goal_stamp"], remaining, _CONTROLLER)
-    elapsed = client.time_to_converge(generator.values["final_goal_stamp"], start, _CONTROLLER)
+    elapsed = client.time_to_converge(generator.values["final_goal_stamp"], start, _CONTROLLER, stamp)
     errors = {key: _number(status, f"{key}_error") for key in ("joint", "position", "orientation")}
     timing = motion_timing(stamp, status.values if status else {}, generator.values)
     payload.update(

@@ -174,7 +174,7 @@ def _await_convergence(
     from manip_kin.pipeline.outcome import motion_timing
 
     converged, status = client.wait_converged(goal_stamp, timeout)
-    elapsed = client.time_to_converge(goal_stamp, start)
+    elapsed = client.time_to_converge(goal_stamp, start, sent_stamp=payload["stamp"])
     outcome = client.outcome(status, goal_stamp)
     if outcome.word == "rejected":
         print(f"manip_kin {args.command}: error: goal rejected: {outcome.reason}", file=sys.stderr)

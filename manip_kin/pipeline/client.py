@@ -142,8 +142,9 @@ class PipelineClient(DeliveringClient, WaitingClient):
 
     def _on_diagnostics(self, msg) -> None:
         now = time.monotonic_ns()
+        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         for status in msg.status:
-            entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now)
+            entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now, stamp_ns)
             self._statuses[status.name] = entry
             if status.message == "converged" and (goal_stamp := entry.values.get("goal_stamp")):
                 self._first_converged.setdefault((status.name, goal_stamp), entry)

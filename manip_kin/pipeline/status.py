@@ -48,12 +48,15 @@ class Status:
         message: its message (the node's state).
         values: key/value pairs.
         received_ns: receive time, ``time.monotonic_ns()``.
+        stamp_ns: the ``DiagnosticArray``'s header stamp: when the node published it, on the
+            ROS clock [ns] (0: unstamped).
     """
 
     name: str
     message: str
     values: dict
     received_ns: int
+    stamp_ns: int = 0
 
     def number(self, key: str) -> float:
         """A value as a float (NaN when empty or missing)."""

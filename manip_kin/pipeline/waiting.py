@@ -100,11 +100,24 @@ class WaitingClient:
             raise PipelineError(f"{key} did not report taking goal {goal_stamp} within {timeout:g} s")
         return status
 
-    def time_to_converge(self, goal_stamp: str, start: float, controller: str = "cartesian_controller") -> float:
+    def time_to_converge(
+        self, goal_stamp: str, start: float, controller: str = "cartesian_controller", sent_stamp: str = ""
+    ) -> float:
         """Seconds from ``start`` (a ``time.monotonic()`` reading) until the controller first
-        reported ``converged`` on the goal stamped ``goal_stamp``; until now if it has not."""
+        reported ``converged`` on the goal stamped ``goal_stamp``; until now if it has not.
+
+        With ``sent_stamp``, the stamp of the message sent at ``start`` (the goal, the line
+        target), the time is read from the two stamps instead: from ``sent_stamp`` to the
+        status's own stamp, so it does not grow with how late this process heard the status (a
+        client starved under load heard it 0.47 s after another one did)."""
+        from manip_kin.ros.wire.messages import stamp_key_to_ns
+
         first = self._first_converged.get((self.status_name(controller), goal_stamp))
-        return (first.received_ns * 1e-9 if first is not None else time.monotonic()) - start
+        if first is None:
+            return time.monotonic() - start
+        if sent_stamp and first.stamp_ns:
+            return (first.stamp_ns - stamp_key_to_ns(sent_stamp)) * 1e-9
+        return first.received_ns * 1e-9 - start
 
     def _resend_unreported(self, topic: str, stamp: str, reported: str) -> None:
         """Publish a goal or line target of ours again when its node has not reported it.
