@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped
-from pipeline_checks import checked_pipeline
+from pipeline_checks import checked_pipeline, recorder_reads
 from sensor_msgs.msg import JointState
 
 from manip_kin.core.rotations import make_transform, rpy_to_matrix
@@ -42,6 +42,10 @@ def recorded_run(tmp_path_factory):
         client.node.create_subscription(JointState, "/joint_states", seen_states.append, 1000)
         client.node.create_subscription(PoseStamped, "/tool_pose", seen_tool.append, 1000)
         assert client.spin_until(lambda: seen_states and seen_tool, 10), "the test's subscriptions got nothing"
+        # The recorder matched before the arm moves (once it matched late, and the recording
+        # began with the arm 3 cm from the goal).
+        streams = ("/joint_states", "/tool_pose", "/joint_velocity_commands")
+        assert client.spin_until(lambda: recorder_reads(client, streams), 30), "the recorder subscribes to nothing"
         stamp = client.send_goal(GOAL)
         converged, status = client.wait_converged(stamp, timeout=40)
         assert converged, status

@@ -29,6 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # net_namespaces
 
 from net_namespaces import HostPair
+from pipeline_checks import recorder_reads
 
 ROBOT = "irb120"
 #: The soak's line (scenario (b) of robots.md, 0.4 m/s): 0.9 m, about 3 s.
@@ -38,17 +39,6 @@ LINE_END = [-0.4, 0.3, 0.5]
 
 #: The topics the test reads from the recording.
 RECORDED = ("/joint_velocity_commands", "/joint_states", "/diagnostics")
-
-
-def _recorder_reads(client, topics) -> bool:
-    """True once this client's graph shows a recorder subscription on each of ``topics`` and a
-    publisher on each (the pair the recorder must have matched; a proxy, on the same host)."""
-    node = client.node
-    for topic in topics:
-        readers = node.get_subscriptions_info_by_topic(topic)
-        if not any(info.node_name == "recorder" for info in readers) or not node.get_publishers_info_by_topic(topic):
-            return False
-    return True
 
 
 def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float, down_s: float) -> dict:
@@ -86,7 +76,7 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
         )
         # The recorder's readers matched before anything moves: under load its reader of the
         # commands once matched after the link went down (no command recorded before it).
-        result["recorder_matched"] = bool(client.spin_until(lambda: _recorder_reads(client, RECORDED), 30))
+        result["recorder_matched"] = bool(client.spin_until(lambda: recorder_reads(client, RECORDED), 30))
         converged, _ = client.wait_converged(client.send_goal(start_pose), 30)
         result["reached_line_start"] = bool(converged)
         line_stamp = client.send_line(end_pose)

@@ -101,3 +101,15 @@ def realtime_measurement(priority: int = 5):
     finally:
         shared.restore()
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def recorder_reads(client, topics) -> bool:
+    """True once ``client``'s graph shows a recorder subscription on each of ``topics`` and a
+    publisher on each: the pair the recorder must have matched (a proxy, on one host). Under
+    load a recorder's reader matched seconds late and missed the start of a motion."""
+    node = client.node
+    for topic in topics:
+        readers = node.get_subscriptions_info_by_topic(topic)
+        if not any(info.node_name == "recorder" for info in readers) or not node.get_publishers_info_by_topic(topic):
+            return False
+    return True
