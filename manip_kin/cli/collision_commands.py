@@ -212,11 +212,13 @@ def _controller_listens(client, topic: str, timeout: float) -> bool:
     ``collision_avoidance``, and reports what it took of the scene). A subscription's node is
     learnt after the subscription itself (Fast DDS: "_NODE_NAME_UNKNOWN_" until then): waited
     for, up to ``timeout``."""
+    from manip_kin.pipeline.status import status_name
+
     controller = client.status_name("cartesian_controller")
 
     def names():
         infos = client.node.get_subscriptions_info_by_topic(topic)
-        known = [f"{info.node_namespace.rstrip('/')}/{info.node_name}".lstrip("/") for info in infos]
+        known = [status_name(info.node_name, info.node_namespace) for info in infos]
         return None if any("_NODE_NAME_UNKNOWN_" in name for name in known) else known
 
     return controller in (client.spin_until(names, timeout) or ())

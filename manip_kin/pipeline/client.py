@@ -24,6 +24,7 @@ from manip_kin.pipeline.domain import ensure_ros_isolation, use_prompt_acknowled
 from manip_kin.pipeline.errors import PipelineError
 from manip_kin.pipeline.status import Status, normalize_namespace, status_name
 from manip_kin.pipeline.waiting import SentTarget, WaitingClient
+from manip_kin.ros.wire.messages import stamp_to_ns
 
 
 class PipelineClient(DeliveringClient, WaitingClient):
@@ -142,7 +143,7 @@ class PipelineClient(DeliveringClient, WaitingClient):
 
     def _on_diagnostics(self, msg) -> None:
         now = time.monotonic_ns()
-        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp_ns = stamp_to_ns(msg.header.stamp)
         for status in msg.status:
             entry = Status(status.name, status.message, {kv.key: kv.value for kv in status.values}, now, stamp_ns)
             self._statuses[status.name] = entry
