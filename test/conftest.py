@@ -72,6 +72,22 @@ def pytest_collection_modifyitems(items):
         item.add_marker(pytest.mark.xdist_group("serial_pipelines" if serial else relative))
 
 
+def pytest_xdist_node_collection_finished(node, ids):
+    """Stop the run when ``--dist loadgroup`` did not take. pytest-xdist groups tests by a suffix
+    it writes into each node id, which pytest 9.2 no longer lets it write; the groups then fall
+    apart silently: a module's tests run on both workers (each starting its own pipeline), two
+    pipelines run at once, and a test that relies on its module's earlier tests fails."""
+    if node.config.getvalue("dist") != "loadgroup":
+        return
+    ungrouped = [nodeid for nodeid in ids if "@" not in nodeid.rpartition("]")[2]]
+    if ungrouped:
+        pytest.exit(
+            f"pytest-xdist did not group {len(ungrouped)} tests (first: {ungrouped[0]}) under "
+            f"pytest {pytest.__version__}; requirements-dev.txt pins a pytest that keeps the groups",
+            returncode=3,
+        )
+
+
 def pytest_terminal_summary(terminalreporter):
     """Why each rerun test failed first: its error lines, so a run (CI's too) shows what a
     rerun hid, not just that one happened."""
