@@ -129,7 +129,7 @@ def _link_row(pair: HostPair, env: dict) -> dict:
         check=True,
     )
     result = json.loads((out / "result.json").read_text())
-    down, up = result["link_down_ns"], result["link_up_ns"]
+    down, up = result["link_down_ns"], result["link_restored_ns"]
     controller = [(t, m) for t, n, _, m in result["statuses"] if n == "cartesian_controller"]
     stale = [t for t, m in controller if t >= down and m.startswith("stale input")]
     back = [t for t, m in controller if t >= up and not m.startswith("stale input")]

@@ -10,7 +10,8 @@ coal shapes, rebuilt only when ``scene.version`` moves). Each cycle
    pair keeps a lower bound on its distance, the larger of the gap between bounding spheres
    and the distance last computed less a joint-rate bound on how far its shapes moved since
    (:func:`~manip_kin.collision.geometry.joint_reach`); while that bound has not spent
-   :data:`BAND`, only the pairs within ``d_i + BAND`` at the last full pass are looked at;
+   :data:`BAND`, only the pairs within ``d_i + BAND`` at the last full pass are looked at,
+   and a pair found beyond ``d_i`` plus what is left of the band is not looked at again;
 3. coal computes the distance ``d`` and witness points ``p_a``, ``p_b`` of the others
    (convex shapes: about 1.3 µs a pair; negative ``d`` is the penetration depth);
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
@@ -214,6 +215,8 @@ class CollisionChecker:
         self._near_rows: list[int] = []
         self._near_cutoff: float | None = None
         self._budget = 0.0
+        #: How many pairs coal computed in the last call (the others were skipped).
+        self.pairs_computed = 0
         self._reach_most = self._reach_pairs.max(axis=1, initial=0.0).tolist()
 
     @property
@@ -260,8 +263,14 @@ class CollisionChecker:
             np.maximum(lower, np.sqrt(np.einsum("ij,ij->i", gaps, gaps)) - self._radius_sums, out=lower)
             rows = self._near_rows = np.flatnonzero(lower < cutoff + BAND).tolist()
             self._near_cutoff, self._budget = cutoff, BAND
+        self.pairs_computed = len(rows)
         if not rows:
             return []
+        # A pair found at cutoff + budget or beyond cannot come within the cutoff before the
+        # budget is spent (it is what the pair may still come nearer): it leaves the near rows,
+        # so a still arm computes only the pairs it must.
+        beyond = cutoff + self._budget
+        near = []
         transforms, count = self._transforms, self._robot_count
         done = [False] * count
         first, second = self._first_list, self._second_list
@@ -278,11 +287,14 @@ class CollisionChecker:
             result.clear()
             distance = functors[row](transforms[a], transforms[b], request, result)
             lower[row] = distance
+            if distance < beyond:
+                near.append(row)
             if distance < cutoff:
                 # The witness points come back as copies; the normal is a view into the result.
                 found.append(
                     (row, distance, result.getNearestPoint1(), result.getNearestPoint2(), result.normal.tolist())
                 )
+        self._near_rows = near
         return found
 
     def _pair(self, found: tuple) -> PairDistance:

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip_kin.collision.distances import CollisionChecker
+from manip_kin.collision.distances import BAND, CollisionChecker
 from manip_kin.collision.geometry import joint_reach
 from manip_kin.core.kinematics import frame_poses
 from manip_kin.core.rotations import make_transform
@@ -52,9 +52,11 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
         st.tuples(st.floats(-0.2, 0.7), st.floats(-0.5, 0.5), st.floats(0.0, 0.9)), min_size=1, max_size=3
     ),
     radius=st.floats(0.03, 0.15),
+    # 0.01: steps of at most 10 mrad, a few to a dozen within one band (what a control loop does).
+    scale=st.sampled_from([1.0, 0.01, 0.001]),
 )
-@settings(max_examples=25, deadline=None)
-def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, centres, radius):
+@settings(max_examples=40, deadline=None)
+def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, centres, radius, scale):
     model, collision = panda
     scene = Scene()
     obstacles = []
@@ -74,7 +76,7 @@ def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, 
     for joint, move, count in steps:
         for _ in range(count):
             q = q.copy()
-            q[joint] = np.clip(q[joint] + move / count, model.lower[joint], model.upper[joint])
+            q[joint] = np.clip(q[joint] + scale * move / count, model.lower[joint], model.upper[joint])
             configurations.append(q)
     for q in configurations:
         answer = sorted((p.label, p.distance) for p in checker.pair_distances(q, CUTOFF))
@@ -102,3 +104,58 @@ def test_joint_reach_bounds_how_far_any_point_of_a_shape_moves(panda, q0, q1, di
         moved = np.linalg.norm(frames[1][geometry.frame] @ local - frames[0][geometry.frame] @ local)
         assert moved <= bound[g] + 1e-12, geometry.link
     assert np.all(reach[:, collision.frames == 0] == 0.0)
+
+
+@given(start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7))
+@settings(max_examples=10, deadline=None)
+def test_a_still_arm_computes_only_the_pairs_within_the_band(panda, start):
+    model, collision = panda
+    scene = Scene()
+    scene.add(make_obstacle(("cell", 0), "sphere", (0.2,) * 3, make_transform(None, [0.4, 0.0, 0.5])))
+    obstacles = [("obstacle:cell/0", coal.Sphere(0.1), make_transform(None, [0.4, 0.0, 0.5]), 0)]
+    checker = CollisionChecker(model, collision)
+    checker.update_scene(scene)
+    q = model.lower + np.array(start) * (model.upper - model.lower)
+    truth = _true_distances(model, collision, obstacles, q)
+    checker.pair_distances(q, CUTOFF)
+    first = checker.pairs_computed  # the full pass: every pair whose bounding spheres are near
+    for _ in range(3):
+        answer = sorted(p.label for p in checker.pair_distances(q.copy(), CUTOFF))
+        assert answer == sorted(label for label, d in truth if d < CUTOFF)
+        # Unmoved, the band is whole: what is computed is what lies within cutoff + BAND.
+        assert checker.pairs_computed == sum(d < CUTOFF + BAND for _, d in truth) <= first
+
+
+def test_a_pair_found_just_beyond_the_cutoff_is_followed_as_it_comes_near(panda):
+    """The hand turns with joint 1 towards a ball first found 1 mm beyond the cutoff, in steps
+    of 0.1 mrad (well within one band): it must be reported from the step it comes within."""
+    from collision_robots import PANDA_READY
+
+    model, collision = panda
+    hand = frame_poses(model, PANDA_READY)[-1][:3, 3]
+    ahead = np.cross([0.0, 0.0, 1.0], hand)
+    ahead /= np.linalg.norm(ahead)  # where joint 1 turns the hand
+
+    def nearest(centre, q):
+        ball = [("obstacle:cell/0", coal.Sphere(0.05), make_transform(None, centre), 0)]
+        return min(d for label, d in _true_distances(model, collision, ball, q) if "obstacle" in label)
+
+    low, high = 0.0, 0.5  # the ball's offset ahead of the hand, bisected to cutoff + 1 mm
+    for _ in range(40):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if nearest(hand + middle * ahead, PANDA_READY) < CUTOFF + 0.001 else (low, middle)
+    centre = hand + high * ahead
+    scene = Scene()
+    scene.add(make_obstacle(("cell", 0), "sphere", (0.1,) * 3, make_transform(None, centre)))
+    checker = CollisionChecker(model, collision)
+    checker.update_scene(scene)
+    q = PANDA_READY.copy()
+    crossed = None
+    for step in range(200):
+        near = [p for p in checker.pair_distances(q, CUTOFF) if p.second == "obstacle:cell/0"]
+        within = nearest(centre, q) < CUTOFF
+        assert bool(near) == within, (step, nearest(centre, q))
+        if within and crossed is None:
+            crossed = step
+        q[0] += 1e-4
+    assert crossed is not None and crossed > 5  # it came within the cutoff, several steps in

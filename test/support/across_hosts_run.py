@@ -12,8 +12,9 @@ here, as does this process's client. The arm first goes to the line's start, the
 starts; ``--down-after`` seconds into it the veth link goes down for ``--down`` seconds and
 comes back. Written to ``DIR/result.json``: every ``/diagnostics`` status this process heard
 (monotonic ns, name, level, message), the link's down and up instants (monotonic and system
-clock, ns), how long the pipeline took to start across the link, the recorder's summary line
-and the recording's path (``DIR/run.mcap``).
+clock, ns; both inside the outage), when the link was back (``link_restored_ns``), how long
+the pipeline took to start across the link, the recorder's summary line and the recording's
+path (``DIR/run.mcap``).
 """
 
 from __future__ import annotations
@@ -86,11 +87,15 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
         streaming = [t for t, n, _, m in statuses if n == "trajectory_generator" and m == "streaming"]
         result["line_started_ns"] = streaming[0] if streaming else time.monotonic_ns()
         client.spin_for(max(0.0, down_after_s - (time.monotonic_ns() - result["line_started_ns"]) * 1e-9))
+        # The outage's instants bracket it from inside: "down" once both ends are down, "up" just
+        # before they come up. (Read after `ip link set up` returned, "up" once came 0.1 s late on
+        # a loaded machine, and the commands the returning states brought looked like outage.)
         pair.set_link(False)
         result["link_down_ns"], result["link_down_wall_ns"] = time.monotonic_ns(), time.time_ns()
         client.spin_for(down_s)
-        pair.set_link(True)
         result["link_up_ns"], result["link_up_wall_ns"] = time.monotonic_ns(), time.time_ns()
+        pair.set_link(True)
+        result["link_restored_ns"] = time.monotonic_ns()
         try:
             generator = client.wait_line_done(line_stamp, 20)
             result["line_done"] = generator.message

@@ -59,7 +59,7 @@ class Harness:
     def publish(self, topic: str, msg) -> None:
         self.publisher(type(msg), topic).publish(msg)
 
-    def wait_matched(self, topic: str, msg_type, timeout: float = 5.0) -> None:
+    def wait_matched(self, topic: str, msg_type, timeout: float = 15.0) -> None:
         publisher = self.publisher(msg_type, topic)
         assert self.spin_until(lambda: publisher.get_subscription_count() > 0, timeout), f"nobody subscribes {topic}"
 

@@ -124,7 +124,7 @@ def test_reads_commands_best_effort(harness):
     publisher = harness.node.create_publisher(
         Float64MultiArray, "/joint_velocity_commands", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
     )
-    assert harness.spin_until(lambda: publisher.get_subscription_count() == 1, 5)
+    assert harness.spin_until(lambda: publisher.get_subscription_count() == 1, 15)
     send = lambda: publisher.publish(Float64MultiArray(data=[0.5, 0.0, 0.0, 0.0, 0.0, 0.0]))  # noqa: E731
     assert harness.spin_until(lambda: joint_states and joint_states[-1].position[0] > 0.05, 10, every=send)
     np.testing.assert_allclose(joint_states[-1].velocity, [0.5, 0, 0, 0, 0, 0], atol=1e-12)
