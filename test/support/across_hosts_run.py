@@ -88,8 +88,8 @@ def run_fault(pair: HostPair, out_dir: Path, rate_hz: float, down_after_s: float
         result["line_started_ns"] = streaming[0] if streaming else time.monotonic_ns()
         client.spin_for(max(0.0, down_after_s - (time.monotonic_ns() - result["line_started_ns"]) * 1e-9))
         # The outage's instants bracket it from inside: "down" once both ends are down, "up" just
-        # before they come up. (Read after `ip link set up` returned, "up" once came 0.1 s late on
-        # a loaded machine, and the commands the returning states brought looked like outage.)
+        # before they come up. (Read after `ip link set up` returned, "up" was late by however long
+        # that command took, and commands on the returning states could count as the outage's.)
         pair.set_link(False)
         result["link_down_ns"], result["link_down_wall_ns"] = time.monotonic_ns(), time.time_ns()
         client.spin_for(down_s)
