@@ -187,7 +187,7 @@ class CommandFilter:
             # follows with the jerk held, which adds no lag. Ruckig's profiles towards such a
             # target lagged it, by different amounts on different joints, and took the tool off
             # a line (docs/performance_limits.md).
-            wobble = not braking and any(target) and self._within_one_step(target)
+            wobble = not braking and any(target) and self._jerk_hold_fits(target)
             if not (wobble and self._hold_jerk(target, previous)):
                 self._step(target)
         self._fd_acceleration = [(v - old) / self.dt for v, old in zip(self._velocity, previous)]
@@ -230,7 +230,7 @@ class CommandFilter:
                 return False
         return True
 
-    def _within_one_step(self, target: list[float]) -> bool:
+    def _jerk_hold_fits(self, target: list[float]) -> bool:
         """True when every joint can reach ``target`` in one period within its acceleration
         bound, from an acceleration ``a`` small enough that easing it off at the jerk limit
         carries the command on by at most half a period's acceleration step (``a²/2J <= A·dt/2``):
