@@ -30,7 +30,8 @@ GOAL = make_transform(rpy_to_matrix(0.0, 1.2, 0.3), [0.2, -0.8, 0.35])
 
 @pytest.fixture(scope="module")
 def recorded_run(tmp_path_factory):
-    """Record a genova7 goal; returns (file, joint states seen by the test, tool poses seen)."""
+    """Record a genova7 goal; returns (file, joint states seen by the test, tool poses seen, the
+    recorder's summary line, times the goal was sent again)."""
     out = tmp_path_factory.mktemp("live") / "run.mcap"
     recorder = NodeProcess("recorder", "recorder", {"output": str(out)})
     controller = {"gain_linear": 2.0, "gain_angular": 2.0}
@@ -49,17 +50,18 @@ def recorded_run(tmp_path_factory):
         stamp = client.send_goal(GOAL)
         converged, status = client.wait_converged(stamp, timeout=40)
         assert converged, status
+        resends = client.resends(stamp)
         # A one-shot message from a publisher created just now is recorded too. send_line returns
         # once every subscriber (the recorder too) acknowledged it: it is in the recorder's queue,
         # which the recorder empties into the file when stopped.
         client.send_line(GOAL)
         assert pipeline.stop_process("recorder", timeout=15) == 0
         summary = pipeline.log_text("recorder").strip().splitlines()[-1]
-    return out, seen_states, seen_tool, summary
+    return out, seen_states, seen_tool, summary, resends
 
 
 def test_recorder_summary_reports_no_loss(recorded_run):
-    _, _, _, summary = recorded_run
+    summary = recorded_run[3]
     # Nothing lost, and /diagnostics (three publishers numbering their own messages) is not
     # mistaken for a lossy topic. (That the count is not stuck at 0 is proven where loss is
     # caused: test_recording_recorder.py.)
@@ -70,7 +72,7 @@ def test_rosbags_reads_every_message_the_test_saw_with_the_same_values(recorded_
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    path, seen_states, seen_tool, _ = recorded_run
+    path, seen_states, seen_tool = recorded_run[:3]
     assert len(seen_states) > 200 and len(seen_tool) > 200
     recorded_states: dict[tuple[int, int], np.ndarray] = {}
     recorded_tool: dict[tuple[int, int], np.ndarray] = {}
@@ -149,7 +151,11 @@ def test_package_reader_agrees_with_rosbags(recorded_run):
 def test_the_recorded_errors_decay_to_the_goal(recorded_run):
     run = load_run(recorded_run[0])
     time, position_error, orientation_error = tracking_errors(run)
-    assert position_error[0] > 0.05  # the goal is far from the start
+    # The goal is far from the start (0.41 m), so the recording has the goal from when it was sent.
+    assert position_error[0] > 0.05, (
+        f"the first tool pose after the recorded goal is {position_error[0]:.3f} m from it: goal logged at "
+        f"{run.goal.time} s, tool from {run.tool.time[0]:.3f} s, goal sent again {recorded_run[4]} times"
+    )
     assert position_error[-1] < 2e-4 and orientation_error[-1] < 2e-3
     assert run.joint_position.shape[1] == 7 and run.command.shape[1] == 7
 
@@ -255,7 +261,7 @@ def test_recording_without_live_tf_gains_tf_that_composes_to_the_tool_pose(recor
 
     from manip_kin.viz.arm_animation import iter_tf_poses
 
-    path, _, _, summary = recorded_run
+    path, summary = recorded_run[0], recorded_run[3]
     assert "/tf synthesised from joint_states" in summary, summary
     counts = {t.name: t.message_count for t in read_info(path).topics}
     assert counts["/tf"] > 20 and counts["/tf_static"] == 1 and counts["/markers"] > 5

@@ -379,6 +379,57 @@ def test_an_all_topics_recording_has_the_one_shot_messages_of_a_client(ros, proc
     assert [f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}" for _, m in recorded] == [stamp]
 
 
+def _goal(node, x: float):
+    from geometry_msgs.msg import PoseStamped
+
+    message = PoseStamped()
+    message.header.stamp = node.get_clock().now().to_msg()
+    message.header.frame_id = "base_link"
+    message.pose.position.x = x
+    message.pose.orientation.w = 1.0
+    return message
+
+
+def test_a_latched_goal_that_reaches_the_recorder_late_is_recorded(ros, processes, tmp_path):
+    # A client's goal publisher is latched. A volatile reader whose side of the match comes after
+    # the goal went out is acknowledged without it; once on CI the recorded goal came a second
+    # late, as the client's resend would. Sent before the recorder exists, the goal is delivered
+    # only from the writer's history, as it is after such a late match.
+    from geometry_msgs.msg import PoseStamped
+
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    goals = ros.create_publisher(PoseStamped, "/goal_pose", latched)
+    goals.publish(_goal(ros, 0.25))
+    output = tmp_path / "latched.mcap"
+    recorder = start_recorder(processes, output, "topics:=[/goal_pose]", "compression:=none")
+    wait_subscribed(ros, [goals], recorder)
+    assert goals.wait_for_all_acked(Duration(seconds=30))
+    recorder.send_signal(signal.SIGINT)
+    _, stderr = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, stderr
+    assert [m.pose.position.x for _, m in read_with_rosbags(output).get("/goal_pose", [])] == [0.25]
+
+
+def test_a_volatile_goal_publisher_is_recorded_too(ros, processes, tmp_path):
+    # RViz's goal tool publishes volatile: the transient-local pre-subscription cannot match it,
+    # and the recorder subscribes again as the publisher offers.
+    from geometry_msgs.msg import PoseStamped
+
+    output = tmp_path / "volatile.mcap"
+    recorder = start_recorder(processes, output, "topics:=[/goal_pose]", "compression:=none")
+    goals = ros.create_publisher(
+        PoseStamped, "/goal_pose", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    )
+    wait_subscribed(ros, [goals], recorder)
+    time.sleep(0.2)  # the recorder's side of the match
+    goals.publish(_goal(ros, 0.5))
+    assert goals.wait_for_all_acked(Duration(seconds=30))
+    recorder.send_signal(signal.SIGINT)
+    _, stderr = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, stderr
+    assert [m.pose.position.x for _, m in read_with_rosbags(output).get("/goal_pose", [])] == [0.5]
+
+
 def test_recorders_are_named_recorder_or_end_in_recorder():
     from manip_kin.pipeline.recorders import recorder_nodes
 

@@ -34,7 +34,6 @@ import time
 from pathlib import Path
 
 from rclpy.node import Node
-from rclpy.qos import ReliabilityPolicy
 
 from manip_kin.recording.errors import RecordingError
 from manip_kin.recording.reader import message_class
@@ -46,6 +45,7 @@ from manip_kin.ros.nodes.recorder_topics import (
     RecordedTopic,
     channel_offer,
     manip_kin_type,
+    presubscription_matches,
     presubscription_qos,
     requested_qos,
 )
@@ -131,10 +131,7 @@ class RecorderNode(Node):
                 entry = self._topics[topic]
                 # Sequence gaps only mean drops while one publisher numbers the messages.
                 entry.single_publisher &= len(publishers) <= 1
-                if entry.presubscribed and any(
-                    p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers
-                ):
-                    # Our reliable pre-subscription cannot match a best-effort publisher.
+                if entry.presubscribed and not presubscription_matches(topic, [p.qos_profile for p in publishers]):
                     self._resubscribe(entry, publishers, types)
                 continue
             if not publishers:

@@ -25,6 +25,10 @@ from manip_kin.ros.wire.topics import PIPELINE_TOPIC_TYPES
 # while discovery catches up. Relative names resolve in the recorder's namespace.
 MANIP_KIN_TOPIC_TYPES = PIPELINE_TOPIC_TYPES
 LATCHED_TOPICS = frozenset({"robot_description"})
+# One-shot commands, which manip_kin's clients publish latched (pipeline.delivery): pre-subscribed
+# transient local too. A volatile reader whose side of the match comes late (under load) is
+# acknowledged without the sample; a transient-local one then gets it from the writer's history.
+ONE_SHOT_TOPICS = frozenset({"goal_pose", "line_target", "joint_trajectory", "collision_objects"})
 # Messages the middleware may queue per topic between two intake passes or while a
 # chunk is compressed: about 2 s of the 1 kHz joint states.
 SUBSCRIPTION_DEPTH = 2000
@@ -55,13 +59,31 @@ def requested_qos(publisher_profiles: list[Any]) -> QoSProfile:
 
 
 def presubscription_qos(topic: str) -> QoSProfile:
-    """As manip_kin's own publishers offer ``topic``: reliable, transient local for the description."""
+    """As manip_kin's own publishers offer ``topic``: reliable; transient local for the
+    description and the one-shot commands."""
     latched = _latched(topic)
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=1 if latched else SUBSCRIPTION_DEPTH,
         reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL
+            if latched or topic.rsplit("/", 1)[-1] in ONE_SHOT_TOPICS
+            else DurabilityPolicy.VOLATILE
+        ),
+    )
+
+
+def presubscription_matches(topic: str, publisher_profiles: list[Any]) -> bool:
+    """False when a publisher offers less than :func:`presubscription_qos` requests (best effort,
+    or volatile where it is transient local): that publisher cannot match the pre-subscription."""
+    requested = presubscription_qos(topic)
+    return all(
+        p.reliability == ReliabilityPolicy.RELIABLE
+        and (
+            requested.durability != DurabilityPolicy.TRANSIENT_LOCAL or p.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        )
+        for p in publisher_profiles
     )
 
 
