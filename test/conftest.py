@@ -72,6 +72,7 @@ def pytest_collection_modifyitems(items):
         item.add_marker(pytest.mark.xdist_group("serial_pipelines" if serial else relative))
 
 
+@pytest.hookimpl(optionalhook=True)
 def pytest_xdist_node_collection_finished(node, ids):
     """Stop the run when ``--dist loadgroup`` did not take. pytest-xdist groups tests by a suffix
     it writes into each node id, which pytest 9.2 no longer lets it write; the groups then fall

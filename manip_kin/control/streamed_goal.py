@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ["StreamedGoal", "StreamedTwist", "advance_pose", "advance_reference", "reference_at"]
+__all__ = ["StreamedGoal", "StreamedTwist", "advance_pose", "advance_reference", "minmod", "reference_at"]
 
 
 def advance_pose(pose: np.ndarray, angular, linear, seconds: float) -> np.ndarray:
@@ -75,7 +75,7 @@ def _offset(instant_ns: int, stamp_ns: int, max_offset: float) -> float | None:
     return offset if abs(offset) <= max_offset else None
 
 
-def _minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def minmod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Per component: the smaller of ``a`` and ``b`` in size where they have the same sign, else 0."""
     return np.where(a * b > 0.0, np.sign(a) * np.minimum(np.abs(a), np.abs(b)), 0.0)
 
@@ -115,8 +115,8 @@ class StreamedTwist:
         if difference is None or previous is None:
             self.angular_rate = self.linear_rate = np.zeros(3)
         else:
-            self.angular_rate = _minmod(difference[0], previous[0])
-            self.linear_rate = _minmod(difference[1], previous[1])
+            self.angular_rate = minmod(difference[0], previous[0])
+            self.linear_rate = minmod(difference[1], previous[1])
         self._last_difference = difference
         self.stamp_ns, self.angular, self.linear = stamp_ns, angular, linear
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip_kin.control.command_filter import CommandFilter, FilterResult
+from manip_kin.control.command_filter import CommandFilter, FilterResult, time_optimal_step
 from manip_kin.control.joint_limits import JointLimit, JointLimits, default_joint_limits, stopping_distance
 from manip_kin.core.robots import load_robot
 
@@ -174,3 +174,25 @@ def test_a_target_that_wobbles_along_a_ramp_is_followed_without_lag(noise_over_j
     # From 50 cycles on: within 3 amplitudes of the noise-free ramp. Ruckig's profiles towards the noisy target lagged it by more.
     ramp = start + ramp_acceleration * np.arange(600)[:, None] * DT
     assert np.max(np.abs(np.array(commands)[50:] - ramp[50:])) <= 3 * amplitude
+
+
+@settings(max_examples=200)
+@given(st.floats(-5.0, 5.0).filter(lambda e: abs(e) > 1e-9), st.floats(10.0, 1e5), st.sampled_from([1e-3, 2e-3, 5e-4]))
+def test_the_time_optimal_step_closes_an_error_without_overshoot_in_the_fewest_periods(error, jerk, dt):
+    """From rest relative to the target, each period's acceleration x changing by at most
+    c = J·dt: the error closes exactly, never changes sign, and ends at rest; in the fewest
+    periods such a sampled stream needs (n rising steps 1c..nc and n falling close at most
+    n²·c·dt, so n >= sqrt(|e| / (c·dt)), and the stream takes 2n periods or one more)."""
+    step = jerk * dt
+    remaining, x, periods = error, 0.0, 0
+    while (remaining or x) and periods < 100_000:
+        wanted = time_optimal_step(remaining, jerk, dt)
+        new_x = min(max(wanted, x - step), x + step)
+        assert abs(new_x - x) <= step * (1 + 1e-12)
+        x, remaining, periods = new_x, remaining - new_x * dt, periods + 1
+        assert remaining * error >= -1e-12 * abs(error)  # no overshoot
+        if abs(remaining) <= 1e-12 * abs(error) and abs(x) <= step:
+            remaining, x, periods = 0.0, 0.0, periods + (x != 0.0)  # lands; then the acceleration ends
+    assert remaining == 0.0 and x == 0.0
+    fewest = 2 * math.ceil(math.sqrt(abs(error) / (step * dt)) - 1e-9)
+    assert fewest - 1 <= periods <= fewest + 2, (periods, fewest)

@@ -186,9 +186,12 @@ def test_a_goal_moved_to_the_states_instant_keeps_the_line_within_its_tolerance(
     as_it_came_deviation, as_it_came_limited = _line_with_jitter(move_goal=False)
     assert moved_deviation <= 0.05, moved_deviation  # issue 24's tolerance for this line: 0.2 mm
     # Taken as it came, a late sample makes the command jump by the gain times a period's travel:
-    # the filter limits most cycles and the tool leaves the line by several times more.
+    # the filter limits a third of the cycles, and the tool leaves the line by more.
     assert as_it_came_limited > 0.3 and moved_limited < 0.05, (as_it_came_limited, moved_limited)
-    assert as_it_came_deviation > 4 * moved_deviation, (as_it_came_deviation, moved_deviation)
+    assert as_it_came_deviation > 1.5 * moved_deviation, (as_it_came_deviation, moved_deviation)
+    # Even so each joint's own time-optimal step keeps it near the line: 0.025 mm here, where
+    # ruckig's synchronised profiles (and, after them, a step with the jerk held) gave 0.16 mm.
+    assert as_it_came_deviation <= 0.08, as_it_came_deviation
 
 
 samples = st.tuples(
