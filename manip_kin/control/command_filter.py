@@ -109,8 +109,8 @@ class CommandFilter:
         self._acceleration = [0.0] * self.dof
         self._fd_acceleration = [0.0] * self.dof  # (v_k - v_k-1) / dt: what the limits bound
         self._previous_target: list[float] | None = None
-        # The target's last finite difference [rad/s² | m/s²]: with this cycle's, its rate.
-        self._target_difference = [0.0] * self.dof
+        # The target's rate of change [rad/s² | m/s²] this update and the one before.
+        self._target_rates = self._target_rate_before = [0.0] * self.dof
         self._ruckig = Ruckig(self.dof, self.dt)
         self._input = InputParameter(self.dof)
         self._input.control_interface = ControlInterface.Velocity
@@ -158,17 +158,20 @@ class CommandFilter:
         self._acceleration = [0.0] * self.dof
         self._fd_acceleration = [0.0] * self.dof
         self._previous_target = None
-        self._target_difference = [0.0] * self.dof
+        self._target_rates = self._target_rate_before = [0.0] * self.dof
         self._braking = {}
         self.result = FilterResult.AT_REST
 
-    def update(self, target, positions=None) -> list[float]:
+    def update(self, target, positions=None, elapsed: float | None = None) -> list[float]:
         """The next command towards ``target`` [rad/s | m/s], shape (n,), as a list.
 
         Args:
             target: the joint rates the law asks for, shape (n,).
             positions: the joint positions the command starts from, shape (n,), for the
                 braking speeds towards the position limits; None skips that step.
+            elapsed: the time since the last update [s] (None: one period), over which the
+                target's own rate is taken. The limits hold per update whatever it is: each
+                command may drive the arm for one period only.
         """
         target = [float(v) for v in target]
         scale = 1.0
@@ -196,6 +199,10 @@ class CommandFilter:
         previous = self._velocity
         if self._previous_target is None:
             self._previous_target = previous
+        # Over the time that passed: a late cycle's target has moved on by more, not faster (a
+        # loop starved for 10 ms took it for a rate ten times the real one, and overshot).
+        span = self.dt if elapsed is None else max(float(elapsed), self.dt)
+        self._target_rates = [(t - p) / span for t, p in zip(target, self._previous_target)]
         if not self.filtering or self._within_limits(target):
             # The law's own command when it already keeps the limits (a line, a converging
             # goal): ruckig would only add its lag. Its acceleration is the finite difference.
@@ -211,7 +218,7 @@ class CommandFilter:
             if not (wobble and self._track(target, previous)):
                 self._step(target)
         self._fd_acceleration = [(v - old) / self.dt for v, old in zip(self._velocity, previous)]
-        self._target_difference = [(t - p) / self.dt for t, p in zip(target, self._previous_target)]
+        self._target_rate_before = self._target_rates
         self._previous_target = target
         if not any(target) and not any(self._velocity):
             self.result = FilterResult.AT_REST
@@ -241,13 +248,11 @@ class CommandFilter:
         and lands with an acceleration the target's own can follow: a step that lands on a
         target moving slower than it arrives would only defer the jerk to the next cycle."""
         dt = self.dt
-        rows = zip(
-            target, self._velocity, self._fd_acceleration, self._previous_target, self._accelerations, self._jerks
-        )
-        for v, old, a_old, v_previous, bound, jerk in rows:
+        rows = zip(target, self._velocity, self._fd_acceleration, self._target_rates, self._accelerations, self._jerks)
+        for v, old, a_old, rate, bound, jerk in rows:
             a = (v - old) / dt
             room = jerk * dt
-            if abs(a) > bound or abs(a - a_old) > room or abs(a - (v - v_previous) / dt) > room:
+            if abs(a) > bound or abs(a - a_old) > room or abs(a - rate) > room:
                 return False
         return True
 
@@ -264,8 +269,7 @@ class CommandFilter:
         False (no step) when the step, or easing its acceleration off after it
         (``v + a·|a|/2J``), would pass a velocity limit."""
         dt = self.dt
-        difference = (np.array(target) - self._previous_target) / dt
-        rates = minmod(difference, np.array(self._target_difference)).tolist()
+        rates = minmod(np.array(self._target_rates), np.array(self._target_rate_before)).tolist()
         velocity, acceleration = [], []
         rows = zip(
             target, rates, previous, self._fd_acceleration, self._accelerations, self._jerks, self._velocity_limits
@@ -319,10 +323,9 @@ class CommandFilter:
         inp = self._input
         # The target's own rate: ruckig lands on a moving target (the law's command during a
         # line) instead of lagging it with a target acceleration of zero.
-        dt = self.dt
-        rates = [(t - p) / dt for t, p in zip(target, self._previous_target)]
         # A target that jumped (a new goal) has no rate to follow: arrive at rest on it.
-        inp.target_acceleration = [r if abs(r) <= bound else 0.0 for r, bound in zip(rates, self._accelerations)]
+        rows = zip(self._target_rates, self._accelerations)
+        inp.target_acceleration = [r if abs(r) <= bound else 0.0 for r, bound in rows]
         # A braking joint stops as fast as it can: not slowed to the others' time.
         braking = self.braking_joints
         if braking or self._synchronised is not True:

@@ -196,3 +196,28 @@ def test_the_time_optimal_step_closes_an_error_without_overshoot_in_the_fewest_p
     assert remaining == 0.0 and x == 0.0
     fewest = 2 * math.ceil(math.sqrt(abs(error) / (step * dt)) - 1e-9)
     assert fewest - 1 <= periods <= fewest + 2, (periods, fewest)
+
+
+@settings(max_examples=20)
+@given(st.integers(0, 1000), st.floats(0.1, 0.5), st.integers(2, 12))
+def test_a_late_cycle_does_not_take_a_ramp_for_a_faster_one(seed, late_fraction, late_periods):
+    """A loop that runs late now and then (a starved controller): the target ramps in real time,
+    and each update is told the time since the last one. The command keeps the limits per update
+    and never runs ahead of the ramp. Taken per period, the late cycles' larger steps looked
+    like a faster ramp and the command ran up to 25 ms of the ramp ahead of it (overshoot)."""
+    model = irb120()
+    limits = JointLimits.of(model)
+    command_filter = CommandFilter(limits, model.lower, model.upper, DT)
+    slope = np.linspace(0.5, 1.5, model.dof)  # [rad/s²]
+    rng = np.random.default_rng(seed)
+    time, last, commands, lead = 0.0, None, [], []
+    while time < 0.5:
+        target = 0.01 + slope * time
+        command = command_filter.update(target, None, None if last is None else time - last)
+        commands.append(command)
+        if len(commands) > 20:  # after the first rise onto the ramp
+            lead.append(float(np.max((np.array(command) - target) / slope)))
+        last = time
+        time += DT * (late_periods if rng.random() < late_fraction else 1)
+    assert_within(commands, limits)
+    assert max(lead) <= 1e-9, max(lead)  # [s of the ramp]

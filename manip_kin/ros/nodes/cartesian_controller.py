@@ -87,6 +87,7 @@ class CartesianControllerNode(LoopingNode):
         self._report_now = False
         self._goal_stream_gap_ns = int(5e9 / self.rate_hz)  # goals closer than 5 periods: a stream
         self._goal_arrival_ns = 0
+        self._last_cycle_ns = 0  # the last cycle's start [ns, monotonic]: the filter's elapsed time
 
         self.servo = ServoInputs(self, ThrottledLog(self.get_logger().warning, 1.0))
         self.servo.configure(self.model, self._singularity)
@@ -290,7 +291,9 @@ class CartesianControllerNode(LoopingNode):
                 self._warn("step", f"control step failed, coming to rest: {error}")
         elif supervisor.state is not ControllerState.STALE_INPUT:
             q = self.inputs.q  # halted with a fresh state: still brake before the position limits
-        self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(target, q)))
+        elapsed = (now_ns - self._last_cycle_ns) * 1e-9 if self._last_cycle_ns else None
+        self._last_cycle_ns = now_ns
+        self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(target, q, elapsed)))
         if self.waiter is not None:
             # Wake on a goal after a quiet spell (a new goal: react at once); not while goals
             # stream in every cycle (a line), which keeps the loop on its own schedule.
