@@ -38,12 +38,21 @@ def manip_kin_type(topic: str) -> str:
     """The type of a manip_kin topic in any namespace (``/left/joint_states``), else ""."""
     if topic in MANIP_KIN_TOPIC_TYPES:
         return MANIP_KIN_TOPIC_TYPES[topic]
-    name = topic.rsplit("/", 1)[-1]
-    return MANIP_KIN_TOPIC_TYPES.get(name, "")
+    return MANIP_KIN_TOPIC_TYPES.get(_name(topic), "")
+
+
+def _name(topic: str) -> str:
+    """The last part of ``topic``: ``joint_states`` of ``/left/joint_states``."""
+    return topic.rsplit("/", 1)[-1]
 
 
 def _latched(topic: str) -> bool:
-    return topic.rsplit("/", 1)[-1] in LATCHED_TOPICS
+    return _name(topic) in LATCHED_TOPICS
+
+
+def _presubscribed_transient_local(topic: str) -> bool:
+    """The description and the one-shot commands."""
+    return _latched(topic) or _name(topic) in ONE_SHOT_TOPICS
 
 
 def requested_qos(publisher_profiles: list[Any]) -> QoSProfile:
@@ -67,9 +76,7 @@ def presubscription_qos(topic: str) -> QoSProfile:
         depth=1 if latched else SUBSCRIPTION_DEPTH,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=(
-            DurabilityPolicy.TRANSIENT_LOCAL
-            if latched or topic.rsplit("/", 1)[-1] in ONE_SHOT_TOPICS
-            else DurabilityPolicy.VOLATILE
+            DurabilityPolicy.TRANSIENT_LOCAL if _presubscribed_transient_local(topic) else DurabilityPolicy.VOLATILE
         ),
     )
 
@@ -77,12 +84,10 @@ def presubscription_qos(topic: str) -> QoSProfile:
 def presubscription_matches(topic: str, publisher_profiles: list[Any]) -> bool:
     """False when a publisher offers less than :func:`presubscription_qos` requests (best effort,
     or volatile where it is transient local): that publisher cannot match the pre-subscription."""
-    requested = presubscription_qos(topic)
+    transient_local = _presubscribed_transient_local(topic)
     return all(
         p.reliability == ReliabilityPolicy.RELIABLE
-        and (
-            requested.durability != DurabilityPolicy.TRANSIENT_LOCAL or p.durability == DurabilityPolicy.TRANSIENT_LOCAL
-        )
+        and (not transient_local or p.durability == DurabilityPolicy.TRANSIENT_LOCAL)
         for p in publisher_profiles
     )
 
