@@ -40,6 +40,12 @@ import time
 
 import numpy as np
 
+#: The line of the line rows: scenario (b)'s 0.4 m/s with its corners rounded at the generator's
+#: default jerk (5 m/s³), so that it asks for no jerk step the controller's limits must round
+#: off late (against the trapezoid at 1 kHz, normal scheduling, 2026-12-03: 0.06–0.19 mm
+#: against 0.07–0.65 mm, docs/performance_limits.md).
+LINE_GENERATOR = {"time_scaling": "jerk_limited"}
+
 TARGETS = {
     "rate": "1 kHz held, p99 period error ≤ 0.3 ms",
     "cpu": "≤ 20 % of one core each",
@@ -381,7 +387,8 @@ def _line_row(
     controller: dict | None = None,
     tag: str = "",
 ) -> dict:
-    """The irb120 line; ``controller``: extra controller parameters, named by ``tag`` in the label."""
+    """The irb120 line, timed ``jerk_limited`` (see :data:`LINE_GENERATOR`); ``generator`` and
+    ``controller``: extra parameters, named by ``tag`` in the label."""
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -389,16 +396,18 @@ def _line_row(
     from manip_kin.core.rotations import make_transform, rpy_to_matrix
     from manip_kin.motion.lines import distance_to_segment
     from manip_kin.pipeline import IRB120_LINE_GENERATOR, Pipeline, pipeline_processes
+    from manip_kin.ros.runtime.polling import PolledSubscription
     from manip_kin.ros.wire.messages import pose_stamped_to_matrix
 
     start, end = [0.4, 0.1, 0.6], [-0.4, 0.3, 0.5]
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
+    line_generator = {**IRB120_LINE_GENERATOR, **LINE_GENERATOR, **(generator or {})}
     processes = pipeline_processes(
         "irb120",
         rate_hz=rate_hz,
         initial_positions=[0.0] * 6,
         controller={"gain_linear": 6.0, "gain_angular": 6.0, **(controller or {})},
-        generator={**IRB120_LINE_GENERATOR, **(generator or {})},
+        generator=line_generator,
         realtime_priority=priority,
         robot_state=robot_state,
     )
@@ -406,9 +415,11 @@ def _line_row(
     with Pipeline(processes, log_dir=tempfile.mkdtemp(prefix="bench_line_")) as pipeline:
         client = pipeline.client()
         converged, _ = client.wait_converged(client.send_goal(make_transform(down, start)), 30)
-        samples: list[np.ndarray] = []
-        client.node.create_subscription(
-            PoseStamped, "tool_pose", lambda m: samples.append(pose_stamped_to_matrix(m)[:3, 3]), 1000
+        # Polled once the line is over, not taken by the client's executor as it runs: a Python
+        # callback for each of the 1000 poses a second cost this client ~48 % of a core, which
+        # the pipeline's own loops then lost on this 2-core machine (measured 2026-12-03).
+        poses = PolledSubscription(
+            client.node, PoseStamped, "tool_pose", QoSProfile(depth=30000, reliability=ReliabilityPolicy.RELIABLE)
         )
         # The segment is the one the generator planned (its path, latched): it starts where the
         # arm was when the line began, which is the start pose only within the convergence
@@ -421,6 +432,9 @@ def _line_row(
         client.spin_for(0.3)
         done = client.wait_line_done(client.send_line(make_transform(down, end)), 15)
         final, status = client.wait_converged(done.values.get("final_goal_stamp", ""), 15)
+        samples = []
+        while (pose := poses.take()) is not None:
+            samples.append(pose_stamped_to_matrix(pose)[:3, 3])
         planned = [pose_stamped_to_matrix(p)[:3, 3] for p in paths[-1].poses] if paths else [start, end]
         offset = float(np.linalg.norm(np.asarray(planned[0]) - start))
         deviation = distance_to_segment(np.array(samples), planned[0], planned[-1]) if samples else np.array([math.nan])
@@ -434,7 +448,7 @@ def _line_row(
             "reached_start": converged,
             "converged_end": final,
             "target": TARGETS["line"],
-            "reference": "gains 6/6 1/s, feed-forward twist",
+            "reference": f"gains 6/6 1/s, feed-forward twist, {line_generator['time_scaling']} line",
         }
 
 
@@ -513,6 +527,8 @@ def run_node_benchmarks(priorities: tuple[int, ...] = (0, 20)) -> list[dict]:
             # What the slice buys: the same 1 kHz loops on the kernel's default slice.
             rows += _loop_rows(1000.0, 0, kernel_default_slice=True)
         rows.append(_line_row(1000.0, priority))
+        if not priority:
+            rows.append(_line_row(1000.0, 0, generator={"time_scaling": "trapezoidal"}, tag="trapezoid"))
         rows += _two_pipeline_rows(500.0, priority)
     return rows
 

@@ -35,7 +35,7 @@ def constant_scaling_problem(line: LineTrajectory, limits: JointLimits) -> str:
         return ""
     return (
         "the constant time scaling starts and stops at full speed at once (an unbounded joint acceleration); "
-        "valid: trapezoidal, cubic or quintic time_scaling while joint acceleration limits are in force"
+        "valid: trapezoidal, jerk_limited, cubic or quintic time_scaling while joint acceleration limits are in force"
     )
 
 

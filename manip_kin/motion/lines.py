@@ -11,13 +11,19 @@ scaling ``s(t)``:
   decelerate (a triangle when the line is too short to reach the cruise speed);
 * ``cubic`` and ``quintic``: polynomials with zero end velocities (quintic: zero end
   accelerations too);
+* ``jerk_limited``: the trapezoid with its corners rounded: the acceleration builds and
+  falls at the jerk limit instead of stepping, so the joint rates a controller follows along
+  it change without the jerk steps a trapezoid's corners ask for (which a jerk-limited
+  command filter can only follow late, off the line);
 * ``constant``: constant speed from the first instant to the last, velocity jumps at both
   ends (the irb120 scenario (b): 0.4 m/s along the line).
 
 Every scaling is sized by the same limits: the shortest duration for which the linear
 speed stays at or below ``max_linear_velocity`` [m/s], the angular speed at or below
 ``max_angular_velocity`` [rad/s] and, except for ``constant``, the accelerations at or
-below ``max_linear_acceleration`` [m/s²] and ``max_angular_acceleration`` [rad/s²].
+below ``max_linear_acceleration`` [m/s²] and ``max_angular_acceleration`` [rad/s²], and
+for ``jerk_limited`` the jerks at or below ``max_linear_jerk`` [m/s³] and
+``max_angular_jerk`` [rad/s³].
 
 Plain numpy: no ROS here.
 """
@@ -32,7 +38,7 @@ import numpy as np
 from manip_kin.core.rotations import check_rotation, matrix_to_rotvec, rotvec_to_matrix
 from manip_kin.errors import InvalidArgumentError, check_finite
 
-TIME_SCALINGS = ("trapezoidal", "cubic", "quintic", "constant")
+TIME_SCALINGS = ("trapezoidal", "cubic", "quintic", "constant", "jerk_limited")
 
 
 @dataclass(frozen=True)
@@ -44,12 +50,17 @@ class MotionLimits:
         max_linear_acceleration: [m/s²], > 0 (not used by ``constant``).
         max_angular_velocity: [rad/s], > 0.
         max_angular_acceleration: [rad/s²], > 0 (not used by ``constant``).
+        max_linear_jerk: [m/s³], > 0 (``jerk_limited`` only).
+        max_angular_jerk: [rad/s³], > 0 (``jerk_limited`` only).
     """
 
     max_linear_velocity: float = 0.25
     max_linear_acceleration: float = 0.5
     max_angular_velocity: float = 0.5
     max_angular_acceleration: float = 1.0
+    # The default accelerations build up in 0.1 s.
+    max_linear_jerk: float = 5.0
+    max_angular_jerk: float = 10.0
 
     def __post_init__(self):
         for name in (
@@ -57,6 +68,8 @@ class MotionLimits:
             "max_linear_acceleration",
             "max_angular_velocity",
             "max_angular_acceleration",
+            "max_linear_jerk",
+            "max_angular_jerk",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -70,12 +83,16 @@ class TimeScaling:
     Attributes:
         kind: one of :data:`TIME_SCALINGS`.
         duration: total time [s], >= 0.
-        ramp_time: acceleration (= deceleration) time of ``trapezoidal`` [s]; 0 otherwise.
+        ramp_time: acceleration (= deceleration) time of ``trapezoidal`` and ``jerk_limited``
+            [s]; 0 otherwise.
+        jerk_time: of ``jerk_limited``, the time [s] the acceleration takes to build up (and
+            to fall) at the jerk limit within each ramp, <= ``ramp_time / 2``; 0 otherwise.
     """
 
     kind: str
     duration: float
     ramp_time: float = 0.0
+    jerk_time: float = 0.0
 
     def evaluate(self, t: float) -> tuple[float, float, float]:
         """Progress ``s`` [-], its rate ``ṡ`` [1/s] and ``s̈`` [1/s²] at time ``t`` [s].
@@ -101,16 +118,40 @@ class TimeScaling:
             sdot = 30.0 * tau2 * (1.0 - tau) ** 2 / duration
             sddot = 60.0 * tau * (1.0 - 3.0 * tau + 2.0 * tau2) / duration**2
             return s, sdot, sddot
-        # trapezoidal: peak rate v = 1 / (duration - ramp), acceleration a = v / ramp.
+        # trapezoidal and jerk_limited: ramp up to the peak rate v = 1 / (duration - ramp),
+        # cruise, and ramp down as the first ramp mirrored in time.
         ramp = self.ramp_time
         peak = 1.0 / (duration - ramp)
-        accel = peak / ramp
         if t < ramp:
-            return 0.5 * accel * t * t, accel * t, accel
+            return self._ramp(t, peak)
         if t <= duration - ramp:
-            return 0.5 * accel * ramp * ramp + peak * (t - ramp), peak, 0.0
-        remaining = duration - t
-        return 1.0 - 0.5 * accel * remaining * remaining, accel * remaining, -accel
+            return 0.5 * peak * ramp + peak * (t - ramp), peak, 0.0
+        s, sdot, sddot = self._ramp(duration - t, peak)
+        return 1.0 - s, sdot, -sddot
+
+    def _ramp(self, t: float, peak: float) -> tuple[float, float, float]:
+        """``(s, ṡ, s̈)`` at ``0 <= t <= ramp_time`` of the ramp from rest up to ``peak`` [1/s].
+
+        The acceleration ``a = peak / (ramp - jerk_time)`` is reached at the jerk
+        ``a / jerk_time`` and held (at once when ``jerk_time`` is 0: the trapezoid); the rate is
+        symmetric about the ramp's middle, so the ramp covers ``peak · ramp / 2``.
+        """
+        ramp, rise = self.ramp_time, self.jerk_time
+        accel = peak / (ramp - rise)
+        if rise <= 0.0:
+            return 0.5 * accel * t * t, accel * t, accel
+        jerk = accel / rise
+        if t < rise:
+            return jerk * t**3 / 6.0, 0.5 * jerk * t * t, jerk * t
+        if t <= ramp - rise:
+            held = t - rise
+            return (
+                accel * rise * rise / 6.0 + 0.5 * accel * rise * held + 0.5 * accel * held * held,
+                0.5 * accel * rise + accel * held,
+                accel,
+            )
+        left = ramp - t  # the rise mirrored: ṡ(ramp - u) = peak - ṡ(u)
+        return 0.5 * peak * ramp - peak * left + jerk * left**3 / 6.0, peak - 0.5 * jerk * left * left, jerk * left
 
     @property
     def peak_rate(self) -> float:
@@ -122,6 +163,7 @@ class TimeScaling:
             "cubic": 1.5,
             "quintic": 1.875,
             "trapezoidal": self.duration / max(self.duration - self.ramp_time, 1e-300),
+            "jerk_limited": self.duration / max(self.duration - self.ramp_time, 1e-300),
         }[self.kind] / self.duration
 
 
@@ -163,12 +205,41 @@ def make_time_scaling(kind: str, length: float, angle: float, limits: MotionLimi
     if kind in _PEAK_RATE:
         duration = max(_PEAK_RATE[kind] / rate_limit, math.sqrt(_PEAK_ACCEL[kind] / accel_limit))
         return TimeScaling(kind, duration)
+    if kind == "jerk_limited":
+        jerk_limit = min(_ratio(limits.max_linear_jerk, length), _ratio(limits.max_angular_jerk, angle))
+        return _jerk_limited(rate_limit, accel_limit, jerk_limit)
     # Trapezoid: cruise at rate_limit when the ramps leave room, else a triangle.
     ramp = rate_limit / accel_limit
     if rate_limit * ramp >= 1.0:
         ramp = math.sqrt(1.0 / accel_limit)
         return TimeScaling(kind, 2.0 * ramp, ramp)
     return TimeScaling(kind, 1.0 / rate_limit + ramp, ramp)
+
+
+def _jerk_limited(rate_limit: float, accel_limit: float, jerk_limit: float) -> TimeScaling:
+    """The fastest rest-to-rest ``jerk_limited`` scaling with ``ṡ``, ``s̈`` and ``s⃛`` within the
+    limits [1/s, 1/s², 1/s³] (the double-S profile of a unit distance)."""
+    if not jerk_limit > 1e-150:
+        raise InvalidArgumentError("a jerk limit this small cannot time the line; valid: a finite duration")
+
+    def ramp_of(peak: float) -> tuple[float, float]:
+        """(ramp, jerk_time) of the shortest ramp from rest to ``peak``."""
+        if peak * jerk_limit >= accel_limit * accel_limit:  # the acceleration limit is reached
+            rise = accel_limit / jerk_limit
+            return peak / accel_limit + rise, rise
+        rise = math.sqrt(peak / jerk_limit)
+        return 2.0 * rise, rise
+
+    ramp, rise = ramp_of(rate_limit)
+    if rate_limit * ramp <= 1.0:  # the two ramps cover peak · ramp: room to cruise
+        return TimeScaling("jerk_limited", 1.0 / rate_limit + ramp, ramp, rise)
+    # No cruise: the peak whose two ramps cover the whole line, peak · ramp(peak) = 1.
+    rise = accel_limit / jerk_limit
+    peak = 0.5 * accel_limit * (math.sqrt(rise * rise + 4.0 / accel_limit) - rise)
+    if peak * jerk_limit < accel_limit * accel_limit:
+        peak = (0.25 * jerk_limit) ** (1.0 / 3.0)
+    ramp, rise = ramp_of(peak)
+    return TimeScaling("jerk_limited", 2.0 * ramp, ramp, rise)
 
 
 def _ratio(limit: float, distance: float) -> float:

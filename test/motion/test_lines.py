@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from manip_kin.core.kinematics import frame_pose
 from manip_kin.core.robots import load_robot
@@ -77,6 +79,51 @@ def test_trapezoid_cruises_at_limit_and_triangle_for_short_lines():
     short = make_time_scaling("trapezoidal", 0.05, 0.0, LIMITS)
     assert math.isclose(short.duration, 2 * math.sqrt(0.05 / 0.8))
     assert short.evaluate(short.duration / 2)[1] * 0.05 < 0.4
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    length=st.floats(1e-3, 3.0),
+    speed=st.floats(0.01, 2.0),
+    acceleration=st.floats(0.05, 10.0),
+    jerk=st.floats(0.5, 500.0),
+)
+def test_jerk_limited_line_keeps_speed_acceleration_and_jerk_and_is_the_fastest(length, speed, acceleration, jerk):
+    """The double-S line: rates from the profile's own samples by finite differences."""
+    limits = MotionLimits(speed, acceleration, 1.0, 1.0, max_linear_jerk=jerk)
+    scaling = make_time_scaling("jerk_limited", length, 0.0, limits)
+    t, s, sdot, sddot = _rates(scaling, 20001)
+    dt = t[1] - t[0]
+    assert s[0] == 0.0 and s[-1] == 1.0 and sdot[0] == 0.0 and sdot[-1] == 0.0
+    # Each of s, ṡ, s̈ is the derivative of the one before (central differences, at every sample
+    # and on both sides of each phase's ends), and none steps: across a phase's end the values
+    # agree to the first order of the gap.
+    h = 1e-6 * scaling.duration
+    ends = [scaling.jerk_time, scaling.ramp_time - scaling.jerk_time, scaling.ramp_time]
+    ends += [scaling.duration - end for end in ends]
+    for instant in [*t[1:-1:50], *(e + side * 10 * h for e in ends for side in (-1, 1))]:
+        before, after = scaling.evaluate(instant - h), scaling.evaluate(instant + h)
+        now = scaling.evaluate(instant)
+        # to the differences' truncation (the jerk times h², or h near a corner of s̈) and round-off
+        assert abs((after[0] - before[0]) / (2 * h) - now[1]) <= jerk / length * h * h + 1e-12 / h
+        assert abs((after[1] - before[1]) / (2 * h) - now[2]) <= jerk / length * h + 1e-12 / h
+    for end in ends:
+        before, after = scaling.evaluate(end - h), scaling.evaluate(end + h)
+        assert abs(after[2] - before[2]) <= 2 * h * jerk / length * (1 + 1e-6) + 1e-12
+    assert abs(sddot[0]) < 1e-9 / scaling.duration**2 and abs(sddot[-1]) < 1e-9 / scaling.duration**2
+    numeric_jerk = np.abs(np.diff(sddot)).max() / dt * length
+    assert numeric_jerk <= jerk * (1 + 1e-6)
+    assert np.abs(sdot).max() * length <= speed * (1 + 1e-9)
+    assert np.abs(sddot).max() * length <= acceleration * (1 + 1e-9)
+    # Rest to rest as fast as the limits let it: with a cruise, the time at the speed plus one
+    # ramp (v/a + a/j when the acceleration limit is reached, else 2·sqrt(v/j)).
+    ramp = speed / acceleration + acceleration / jerk if speed * jerk >= acceleration**2 else 2 * math.sqrt(speed / jerk)
+    if speed * ramp <= length:
+        assert math.isclose(scaling.duration, length / speed + ramp, rel_tol=1e-9)
+    else:  # no cruise: some limit other than the speed is reached
+        assert np.abs(sddot).max() * length > acceleration * 0.999 or numeric_jerk > jerk * 0.99
+    # Never faster than the trapezoid, which has the same speed and acceleration limits.
+    assert scaling.duration >= make_time_scaling("trapezoidal", length, 0.0, limits).duration * (1 - 1e-12)
 
 
 def test_constant_velocity_line_irb120_scenario():

@@ -43,7 +43,8 @@ PARAMETERS = (
     ),
     # Motion limits: from 0.1 mm/s (a 2 m line then takes 6 h) to 10 m/s and 100 m/s^2 (beyond any
     # arm; the speeds are also capped at twice what this arm can do, see trajectory_generator_params.check_limits); the
-    # angular ones from 1e-4 rad/s to 100 rad/s and 1000 rad/s^2. The lower bounds keep durations finite.
+    # angular ones from 1e-4 rad/s to 100 rad/s and 1000 rad/s^2; jerks from 0.01 to 1e4 m/s^3 and
+    # 1e5 rad/s^3. The lower bounds keep durations finite.
     ParamSpec(
         "max_linear_velocity",
         "float",
@@ -82,6 +83,26 @@ PARAMETERS = (
         "rad/s^2",
         minimum=1e-3,
         maximum=1e3,
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_linear_jerk",
+        "float",
+        5.0,
+        "jerk limit of the position ('jerk_limited' only)",
+        "m/s^3",
+        minimum=1e-2,
+        maximum=1e4,
+        tunable=True,
+    ),
+    ParamSpec(
+        "max_angular_jerk",
+        "float",
+        10.0,
+        "angular jerk limit ('jerk_limited' only)",
+        "rad/s^3",
+        minimum=1e-2,
+        maximum=1e5,
         tunable=True,
     ),
     ParamSpec("check_reach", "bool", True, "reject a line the arm cannot follow within its joint limits", tunable=True),

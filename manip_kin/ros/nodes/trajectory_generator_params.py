@@ -46,6 +46,8 @@ def generator_settings(model: RobotModel, bounds: InputBounds, params: ParamStru
         max_linear_acceleration=params.max_linear_acceleration,
         max_angular_velocity=params.max_angular_velocity,
         max_angular_acceleration=params.max_angular_acceleration,
+        max_linear_jerk=params.max_linear_jerk,
+        max_angular_jerk=params.max_angular_jerk,
     )
     check_limits(limits, bounds)
     return GeneratorSettings(
@@ -70,6 +72,8 @@ def check_limits(limits: MotionLimits, bounds: InputBounds) -> None:
         ("max_angular_velocity", limits.max_angular_velocity, bounds.max_twist_angular),
         ("max_linear_acceleration", limits.max_linear_acceleration, UNBOUNDED),
         ("max_angular_acceleration", limits.max_angular_acceleration, UNBOUNDED),
+        ("max_linear_jerk", limits.max_linear_jerk, UNBOUNDED),
+        ("max_angular_jerk", limits.max_angular_jerk, UNBOUNDED),
     ):
         if value > valid:
             raise InvalidArgumentError(
