@@ -53,10 +53,10 @@ def test_advance_reference_moves_along_the_velocities():
     assert reference_at([0.1], [2.0], 5 * PERIOD_NS, 16 * PERIOD_NS, 0.01) == [0.1]
 
 
-def _trapezoid_line() -> LineTrajectory:
+def _trapezoid_line(kind: str = "trapezoidal") -> LineTrajectory:
     down = rpy_to_matrix(0.0, math.pi / 2, 0.0)
     start, end = make_transform(down, [0.4, 0.1, 0.6]), make_transform(down, [-0.4, 0.3, 0.5])
-    return LineTrajectory.plan(start, end, "trapezoidal", MotionLimits(0.4, 0.5, 1.0))
+    return LineTrajectory.plan(start, end, kind, MotionLimits(0.4, 0.5, 1.0))
 
 
 def test_the_twist_is_moved_along_its_rate_through_an_acceleration_phase():
@@ -131,10 +131,12 @@ def test_a_goal_in_the_cruise_is_exact_however_late():
     np.testing.assert_array_equal(pose, line.sample(1.203)[0])
 
 
-def _line_with_jitter(move_goal: bool, seed: int = 3) -> tuple[float, float]:
-    """The irb120 line at 0.4 m/s through the law and the command filter at 1 kHz, as the
+def _line_with_jitter(
+    move_goal: bool, seed: int = 3, kind: str = "trapezoidal", late: float = 0.1
+) -> tuple[float, float]:
+    """The irb120 line at 0.4 m/s (timed ``kind``) through the law and the command filter at 1 kHz, as the
     controller node composes them, with a goal stream that runs late: one sample in ten comes
-    a period late (the law then has the one before). Each command drives the next period, and
+    a period late (``late``: the fraction; the law then has the one before). Each command drives the next period, and
     the state is predicted to its middle. Returns (max deviation from the segment [mm],
     fraction of cycles the filter limited)."""
     from manip_kin.control.command_filter import CommandFilter, FilterResult
@@ -147,7 +149,7 @@ def _line_with_jitter(move_goal: bool, seed: int = 3) -> tuple[float, float]:
     from manip_kin.motion.lines import distance_to_segment
 
     model = load_robot("irb120")
-    line = _trapezoid_line()
+    line = _trapezoid_line(kind)
     limits = JointLimits.of(model)
     controller = CartesianController(model, ControllerConfig(gain_angular=6.0, gain_linear=6.0))
     command_filter = CommandFilter(limits, model.lower, model.upper, 1e-3)
@@ -160,7 +162,7 @@ def _line_with_jitter(move_goal: bool, seed: int = 3) -> tuple[float, float]:
     points, limited = [], 0
     steps = int(line.duration * 1000)
     for k in range(steps):  # the state at k ms, before period k (k to k+1 ms) is driven
-        if newest is None or rng.random() >= 0.1:  # else this period's sample is late
+        if newest is None or rng.random() >= late:  # else this period's sample is late
             newest = k
             pose, twist = line.sample(k * 1e-3)
             streamed.pose_received(k * PERIOD_NS, pose)
@@ -192,6 +194,15 @@ def test_a_goal_moved_to_the_states_instant_keeps_the_line_within_its_tolerance(
     # Even so each joint's own time-optimal step keeps it near the line: 0.025 mm here, where
     # ruckig's synchronised profiles (and, after them, a step with the jerk held) gave 0.16 mm.
     assert as_it_came_deviation <= 0.08, as_it_came_deviation
+
+
+def test_a_jerk_limited_line_asks_for_no_jerk_step_the_filter_must_round_off():
+    """On time, the trapezoid's corners (acceleration steps) are the cycles the filter limits,
+    and where the tool leaves the line; the jerk-limited line has none of them."""
+    trapezoid_deviation, trapezoid_limited = _line_with_jitter(move_goal=True, late=0.0)
+    rounded_deviation, rounded_limited = _line_with_jitter(move_goal=True, late=0.0, kind="jerk_limited")
+    assert trapezoid_limited > 0.003 and rounded_limited == 0.0, (trapezoid_limited, rounded_limited)
+    assert rounded_deviation < 0.5 * trapezoid_deviation, (rounded_deviation, trapezoid_deviation)
 
 
 samples = st.tuples(

@@ -117,7 +117,9 @@ def test_jerk_limited_line_keeps_speed_acceleration_and_jerk_and_is_the_fastest(
     assert np.abs(sddot).max() * length <= acceleration * (1 + 1e-9)
     # Rest to rest as fast as the limits let it: with a cruise, the time at the speed plus one
     # ramp (v/a + a/j when the acceleration limit is reached, else 2·sqrt(v/j)).
-    ramp = speed / acceleration + acceleration / jerk if speed * jerk >= acceleration**2 else 2 * math.sqrt(speed / jerk)
+    ramp = (
+        speed / acceleration + acceleration / jerk if speed * jerk >= acceleration**2 else 2 * math.sqrt(speed / jerk)
+    )
     if speed * ramp <= length:
         assert math.isclose(scaling.duration, length / speed + ramp, rel_tol=1e-9)
     else:  # no cruise: some limit other than the speed is reached
