@@ -66,12 +66,37 @@ def _state_stream(harness, q=Q0):
     return stream
 
 
-@pytest.mark.parametrize("scaling", ["trapezoidal", "quintic", "constant"])
+#: The jerk limit of the jerk_limited line [m/s³]: the 1 m/s² is reached in 0.05 s.
+JERK = 20.0
+
+
+def _double_s_progress(times, length):
+    """Progress of the line at ``times`` [s]: its jerk schedule (±JERK while the acceleration
+    ramps, none while it is held at 1 m/s² or cruising at 0.3 m/s) integrated three times."""
+    rise, held, ramp = 1.0 / JERK, 0.3 / 1.0 - 1.0 / JERK, 0.3 / 1.0 + 1.0 / JERK
+    cruise = length / 0.3 - ramp
+    up = [(rise, JERK), (held, 0.0), (rise, -JERK)]
+    schedule = [*up, (cruise, 0.0), *[(span, -jerk) for span, jerk in up]]
+    dt = 1e-5
+    jerk = np.concatenate([np.full(int(round(span / dt)), value) for span, value in schedule])
+    acceleration = np.cumsum(jerk) * dt
+    speed = np.cumsum(acceleration) * dt
+    position = np.concatenate([[0.0], np.cumsum(speed) * dt])
+    return np.interp(times, np.arange(position.size) * dt, position / position[-1])
+
+
+@pytest.mark.parametrize("scaling", ["trapezoidal", "quintic", "constant", "jerk_limited"])
 def test_streams_line_then_holds(harness, scaling):
     # A constant line is a velocity step: it runs only without joint acceleration limits.
     limits = without_acceleration_limits(MODEL.joint_names) if scaling == "constant" else {}
     node, goals, twists, paths, diagnostics = _start(
-        harness, time_scaling=scaling, max_linear_velocity=0.3, max_linear_acceleration=1.0, path_points=17, **limits
+        harness,
+        time_scaling=scaling,
+        max_linear_velocity=0.3,
+        max_linear_acceleration=1.0,
+        max_linear_jerk=JERK,
+        path_points=17,
+        **limits,
     )
     stream = _state_stream(harness)
     harness.spin_for(0.1, every=stream)
@@ -103,7 +128,12 @@ def test_streams_line_then_holds(harness, scaling):
     stamps = [stamp_to_ns(g.header.stamp) for g in goals]
     assert all(b > a for a, b in zip(stamps, stamps[1:]))
     duration = (stamps[-1] - stamps[0]) * 1e-9
-    expected = {"constant": length / 0.3, "quintic": max(1.875 * length / 0.3, math.sqrt(5.7735 * length / 1.0))}
+    expected = {
+        "constant": length / 0.3,
+        "quintic": max(1.875 * length / 0.3, math.sqrt(5.7735 * length / 1.0)),
+        # 1 m/s² reached at the jerk in 0.05 s and held; 0.3 m/s reached at 0.35 s; cruise between.
+        "jerk_limited": length / 0.3 + 0.3 / 1.0 + 1.0 / JERK,
+    }
     if scaling in expected:
         # The timing is checked on the stamps, not on the wall clock of this test: inverting the
         # closed-form profile s(t) at each goal's progress gives the time into the line at which
@@ -116,7 +146,11 @@ def test_streams_line_then_holds(harness, scaling):
         # agree to 2 ms, none be off by 0.1 s. A wrong profile drifts by 100s of ms across them all.
         total = expected[scaling]
         grid = np.linspace(0.0, 1.0, 200001)
-        profile = grid if scaling == "constant" else 10 * grid**3 - 15 * grid**4 + 6 * grid**5
+        profile = {
+            "constant": grid,
+            "quintic": 10 * grid**3 - 15 * grid**4 + 6 * grid**5,
+            "jerk_limited": _double_s_progress(grid * total, length),
+        }[scaling]
         inner = [(t, d / length) for t, d in zip(stamps, progress) if 0.05 < d / length < 0.95]
         assert len(inner) >= 5  # (a loaded machine runs the 200 Hz loop slower: 17 were seen)
         starts = [t * 1e-9 - np.interp(fraction, profile, grid) * total for t, fraction in inner]
