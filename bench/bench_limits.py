@@ -10,7 +10,8 @@
 * the controller's CPU at 1 kHz with the limits and without them (every joint's
   ``has_acceleration_limits`` and ``has_jerk_limits`` false), a goal running, and the
   goal-to-first-reacting-command latency of those pipelines (bench_nodes' loop and latency rows);
-* the irb120 line offline (law, filter and a perfect integrator; no ROS, no timing);
+* the irb120 line offline (law, filter and a perfect integrator; no ROS, no timing), and the
+  same with a starved controller whose cycles sometimes come late (simulated, seeded);
 * time to converge on genova7's pose goal scenario and the irb120 line deviation at 0.4 m/s
   (normal scheduling and SCHED_FIFO 20), with and without the limits.
 
@@ -35,6 +36,10 @@ import numpy as np
 #: genova7's pose goal scenario (robots.md): start, goal tool pose position and rpy.
 GENOVA7_Q0 = [math.pi / 2, -math.pi / 4, 0.0, -math.pi / 4, 0.0, 0.15, math.pi / 4]
 GENOVA7_GOAL = ([0.2, -0.7, 0.3], (0.0, 1.57, 0.0))
+
+#: The starved rows: the chance that a cycle's next one is late, and by how many periods at most.
+STARVED_LATE = (0.01, 0.02, 0.05)
+STARVED_PERIODS = 10
 
 #: The labels of the two configurations.
 WITH, WITHOUT = "with limits", "without limits"
@@ -188,7 +193,17 @@ def limits_on_and_off(model) -> dict:
 
 
 def closed_loop(
-    model, limits, reference, q0, steps: int, gain: float, dt: float = 0.001, until=None, jitter: float = 0.0
+    model,
+    limits,
+    reference,
+    q0,
+    steps: int,
+    gain: float,
+    dt: float = 0.001,
+    until=None,
+    jitter: float = 0.0,
+    late: float = 0.0,
+    late_periods: int = 10,
 ) -> dict:
     """The law, the command filter and a perfect integrator at ``dt``, as the controller node
     runs them (its position-limit horizon: a stop from full speed), without ROS or timing.
@@ -199,6 +214,10 @@ def closed_loop(
         jitter: the reference is taken at ``t`` plus a uniform error of at most this [s]
             (seeded): a goal paired with a state of a slightly different instant, as in a
             pipeline whose loops and delivery run off time.
+        late: the chance [0, 1] that a cycle's next one comes late, by 2 to ``late_periods``
+            periods (seeded): a starved loop. Meanwhile the arm keeps driving the last command
+            (a hold-last-command interface) and the reference moves on; the late cycle's
+            filter update is given the time that passed.
 
     Returns:
         ``points`` (controlled frame positions after each step, shape (k, 3)), ``steps``
@@ -213,23 +232,43 @@ def closed_loop(
     velocity = np.where(np.isfinite(limits.velocity), limits.velocity, 0.0)
     horizon = max(dt, limits.stopping_time(velocity))
     q, points, lag = np.array(q0, dtype=float), [], 0.0
-    timing_errors = np.random.default_rng(0).uniform(-jitter, jitter, steps)
+    rng = np.random.default_rng(0)
+    timing_errors = rng.uniform(-jitter, jitter, steps)
+    command, next_cycle, last_cycle = np.zeros(model.dof), 0, None
     for k in range(steps):
-        pose, twist = reference(max(0.0, k * dt + timing_errors[k]))
-        output = controller.step(q, pose, twist, horizon)
-        if until is not None and until(output):
-            break
-        command = np.asarray(command_filter.update(output.qdot, q))
-        lag = max(lag, float(np.max(np.abs(output.qdot - command))))
+        if k >= next_cycle:
+            pose, twist = reference(max(0.0, k * dt + timing_errors[k]))
+            output = controller.step(q, pose, twist, horizon)
+            if until is not None and until(output):
+                break
+            elapsed = None if last_cycle is None else (k - last_cycle) * dt
+            command = np.asarray(command_filter.update(output.qdot, q, elapsed))
+            lag = max(lag, float(np.max(np.abs(output.qdot - command))))
+            last_cycle = k
+            next_cycle = k + (int(rng.integers(2, late_periods + 1)) if late and rng.random() < late else 1)
         q = q + dt * command
         points.append(pose_in_base(model, q, controller.frame_index)[:3, 3])
     return {"points": np.array(points), "steps": k, "lag": lag}
 
 
+def _along(line):
+    """``t [s] -> (pose, twist)`` of ``line``, held at its end (no twist after it)."""
+
+    def along_line(t: float):
+        pose, twist = line.sample(min(t, line.duration))
+        return pose, twist if t < line.duration else None
+
+    return along_line
+
+
 def offline_rows(dt: float = 0.001) -> list[dict]:
     """Without ROS (:func:`closed_loop`), with and without the limits: the irb120 line of
     bench_nodes (0.4 m/s, IRB120_LINE_GENERATOR's trapezoid, gains 6/s, feed-forward twist) and
-    genova7's pose goal scenario. No timing in them: what the filter alone changes."""
+    genova7's pose goal scenario. No timing in them: what the filter alone changes. Then the
+    node rows' line (``jerk_limited``) with a starved controller (``late``, simulated): what a
+    late cycle costs with and without the limits."""
+    from bench_nodes import LINE_GENERATOR
+
     from manip_kin.core.robots import load_robot
     from manip_kin.core.rotations import make_transform, rpy_to_matrix
     from manip_kin.ik.iterative import solve_ik
@@ -246,28 +285,42 @@ def offline_rows(dt: float = 0.001) -> list[dict]:
     )
     line = LineTrajectory.plan(start, end, IRB120_LINE_GENERATOR["time_scaling"], motion)
 
-    def along_line(t: float):
-        pose, twist = line.sample(min(t, line.duration))
-        return pose, twist if t < line.duration else None
-
     q_start = solve_ik(irb120, start, np.zeros(irb120.dof)).q
     steps = int((line.duration + 0.5) / dt)
     line_row: dict = {"metric": "irb120 line 0.4 m/s, offline closed loop at 1 kHz (no ROS)"}
     for tag, limits in limits_on_and_off(irb120).items():
-        run = closed_loop(irb120, limits, along_line, q_start, steps, 6.0, dt)
+        run = closed_loop(irb120, limits, _along(line), q_start, steps, 6.0, dt)
         deviation = distance_to_segment(run["points"], start[:3, 3], end[:3, 3])
         key = tag.replace(" ", "_")
         line_row[f"{key}_max_deviation_mm"] = float(deviation.max() * 1e3)
         line_row[f"{key}_max_command_lag"] = run["lag"]
         # What the limits do with a goal taken a little off the state's instant.
         for jitter_ms in (0.1, 0.5):
-            run = closed_loop(irb120, limits, along_line, q_start, steps, 6.0, dt, jitter=jitter_ms * 1e-3)
+            run = closed_loop(irb120, limits, _along(line), q_start, steps, 6.0, dt, jitter=jitter_ms * 1e-3)
             deviation = distance_to_segment(run["points"], start[:3, 3], end[:3, 3])
             line_row[f"{key}_goal_jitter_{jitter_ms}ms_max_deviation_mm"] = float(deviation.max() * 1e3)
     line_row["target"] = "≤ 0.2 mm (issue 24)"
     line_row["reference"] = (
         "deterministic; lag: max |law's rate - command| of any joint [rad/s]; goal_jitter: the goal taken at "
         "its instant ± up to that much (uniform, seeded)"
+    )
+    # The node rows' line (jerk_limited) with a starved controller: what a late cycle costs.
+    jerk_line = LineTrajectory.plan(start, end, LINE_GENERATOR["time_scaling"], motion)
+    starved_row: dict = {
+        "metric": f"irb120 line 0.4 m/s ({LINE_GENERATOR['time_scaling']}), offline at 1 kHz, the controller starved"
+    }
+    steps = int((jerk_line.duration + 0.5) / dt)
+    for late in STARVED_LATE:
+        for tag, limits in limits_on_and_off(irb120).items():
+            run = closed_loop(
+                irb120, limits, _along(jerk_line), q_start, steps, 6.0, dt, late=late, late_periods=STARVED_PERIODS
+            )
+            deviation = distance_to_segment(run["points"], start[:3, 3], end[:3, 3])
+            starved_row[f"late_{late:g}_{tag.replace(' ', '_')}_max_deviation_mm"] = float(deviation.max() * 1e3)
+    starved_row["target"] = "≤ 0.2 mm (issue 24)"
+    starved_row["reference"] = (
+        f"deterministic; late_p: each cycle's next one comes 2-{STARVED_PERIODS} periods late with chance p "
+        "(seeded), the arm holding the last command meanwhile"
     )
 
     genova7 = load_robot("genova7")
@@ -283,7 +336,7 @@ def offline_rows(dt: float = 0.001) -> list[dict]:
     converge_row["exponential_s"] = _exponential_time(genova7, goal)
     converge_row["target"] = "close to the exponential time"
     converge_row["reference"] = "deterministic; gains 0.8/0.8 1/s, tolerances 1e-4 m, 1e-3 rad"
-    return [line_row, converge_row]
+    return [line_row, starved_row, converge_row]
 
 
 def _exponential_time(model, goal) -> float:
