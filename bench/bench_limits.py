@@ -242,7 +242,8 @@ def closed_loop(
             if until is not None and until(output):
                 break
             elapsed = None if last_cycle is None else (k - last_cycle) * dt
-            command = np.asarray(command_filter.update(output.qdot, q, elapsed))
+            # As the node: a law with a feed-forward twist follows a moving reference.
+            command = np.asarray(command_filter.update(output.qdot, q, elapsed, twist is not None))
             lag = max(lag, float(np.max(np.abs(output.qdot - command))))
             last_cycle = k
             next_cycle = k + (int(rng.integers(2, late_periods + 1)) if late and rng.random() < late else 1)

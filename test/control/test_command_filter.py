@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip_kin.control.command_filter import CommandFilter, FilterResult, time_optimal_step
+from manip_kin.control.command_filter import MAKE_UP_DONE, CommandFilter, FilterResult, time_optimal_step
 from manip_kin.control.joint_limits import JointLimit, JointLimits, default_joint_limits, stopping_distance
 from manip_kin.core.robots import load_robot
 
@@ -196,6 +196,46 @@ def test_the_time_optimal_step_closes_an_error_without_overshoot_in_the_fewest_p
     assert remaining == 0.0 and x == 0.0
     fewest = 2 * math.ceil(math.sqrt(abs(error) / (step * dt)) - 1e-9)
     assert fewest - 1 <= periods <= fewest + 2, (periods, fewest)
+
+
+def _ramp_driven(late_fraction: float, late_periods: int, seed: int, feed_forward: bool):
+    """A target ramping in real time (late updates from 0.05 s to 0.5 s, then 0.4 s on time; none
+    with ``late_periods`` 1), each command held by the arm until the next update: (commands, the
+    displacement they drove [rad])."""
+    model = irb120()
+    command_filter = CommandFilter(JointLimits.of(model), model.lower, model.upper, DT)
+    slope = np.linspace(0.5, 1.5, model.dof)  # [rad/s²]
+    rng = np.random.default_rng(seed)
+    k, last, commands, driven = 0, None, [], np.zeros(model.dof)
+    while k < 900:
+        target = 0.01 + slope * k * DT
+        command = command_filter.update(target, None, None if last is None else (k - last) * DT, feed_forward)
+        commands.append(command)
+        # Late from 50 ms on (once on the ramp), the first time at 50 ms.
+        late = k == 50 or (50 < k < 500 and rng.random() < late_fraction)
+        periods = late_periods if late else 1
+        driven += np.array(command) * periods * DT
+        last, k = k, k + periods
+    return commands, driven
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 1000), st.floats(0.0, 0.3), st.integers(3, 12))
+def test_what_late_cycles_cost_a_moving_reference_is_made_up_within_the_limits(seed, late_fraction, late_periods):
+    """A starved loop on a moving reference (``feed_forward``): the arm drives each command until
+    the next update, so a late one costs displacement, and the jerk limit closes the lag late.
+    The filter makes that up within the limits per update: once on time again, the commands
+    have driven what an on-time loop's drove, to a millionth of what a late cycle cost; without
+    the make-up the debt stays."""
+    limits = JointLimits.of(irb120())
+    _, on_time = _ramp_driven(0.0, 1, seed, True)
+    commands, made_up = _ramp_driven(late_fraction, late_periods, seed, True)
+    _, held = _ramp_driven(late_fraction, late_periods, seed, False)
+    assert_within(commands, limits)
+    debt = np.abs(held - on_time).max()
+    assert debt > 2e-6, debt  # [rad]: the loss without the make-up
+    left = np.abs(made_up - on_time).max()
+    assert left <= 0.1 * debt and left <= 5 * MAKE_UP_DONE, (left, debt)
 
 
 @settings(max_examples=20)

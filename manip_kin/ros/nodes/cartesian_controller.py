@@ -256,12 +256,13 @@ class CartesianControllerNode(LoopingNode):
         supervisor = self.supervisor
         target = self._zeros
         q = None
+        feed_forward = False  # the law follows a moving reference: a late cycle's loss is made up
         if supervisor.gate(now_ns):
             try:
                 q, instant_ns = self.law_state()
                 kind = supervisor.goal_kind
                 if kind is GoalKind.JOINT:
-                    target = self._joint_step(now_ns, q, instant_ns)
+                    target, feed_forward = self._joint_step(now_ns, q, instant_ns)
                 elif kind is GoalKind.TWIST:
                     self.output, target = self.servo.twist_step(self.law, q, now_ns, self.dt, self.limit_horizon)
                     limited = set(self.output.limited_joints) | set(self.command_filter.braking_joints)
@@ -281,6 +282,7 @@ class CartesianControllerNode(LoopingNode):
                     output = self.law.step(q, goal, twist, self.limit_horizon)
                     self.output = output
                     target = output.qdot
+                    feed_forward = twist is not None
                     command_filter = self.command_filter
                     ramping = command_filter.result is not FilterResult.FOLLOWING  # at rest: from rest
                     supervisor.pose_step_done(output, twist_fresh, now_ns, command_filter.braking_joints, ramping)
@@ -293,7 +295,8 @@ class CartesianControllerNode(LoopingNode):
             q = self.inputs.q  # halted with a fresh state: still brake before the position limits
         elapsed = (now_ns - self._last_cycle_ns) * 1e-9 if self._last_cycle_ns else None
         self._last_cycle_ns = now_ns
-        self._command_pub.publish(self._command_cdr.encode(self.command_filter.update(target, q, elapsed)))
+        command = self.command_filter.update(target, q, elapsed, feed_forward)
+        self._command_pub.publish(self._command_cdr.encode(command))
         if self.waiter is not None:
             # Wake on a goal after a quiet spell (a new goal: react at once); not while goals
             # stream in every cycle (a line), which keeps the loop on its own schedule.
@@ -345,10 +348,11 @@ class CartesianControllerNode(LoopingNode):
         self.halt()
         super().stop()
 
-    def _joint_step(self, now_ns: int, q: np.ndarray, instant_ns: int | None) -> np.ndarray:
+    def _joint_step(self, now_ns: int, q: np.ndarray, instant_ns: int | None) -> tuple[np.ndarray, bool]:
         """One step of the joint tracking law from ``q``; the reference velocity is used while it
         is fresh (as the goal twist: a stalled stream must not carry the arm on), and then moves
-        the reference to the instant ``q`` is for (see :meth:`law_state`)."""
+        the reference to the instant ``q`` is for (see :meth:`law_state`). Returns the joint
+        rates and whether they follow a moving reference (a fresh, nonzero reference velocity)."""
         q_reference, qdot_reference = self.inputs.reference
         fresh = self.supervisor.goal_fresh(now_ns)
         if fresh and instant_ns is not None:
@@ -374,7 +378,7 @@ class CartesianControllerNode(LoopingNode):
         self.supervisor.joint_step_done(output, fresh, now_ns)
         if law is not None:
             self.supervisor.collision_blocked(self.collision.joint_step_done(output, now_ns))
-        return output.qdot
+        return output.qdot, qdot_reference is not None and bool(np.any(qdot_reference))
 
     def _publish_diagnostics(self, now_ns: int) -> None:
         level = self.diagnostic_level(self.supervisor.level)

@@ -165,6 +165,44 @@ def test_feed_forward_used_while_fresh(harness):
     assert time.monotonic() - last_twist[0] > 0.5
 
 
+def test_the_filter_is_told_while_the_law_follows_a_feed_forward(harness):
+    """The command filter makes up what a late cycle cost only for a law that follows a moving
+    reference (command_filter.py): a goal with a fresh twist says so, a goal alone does not."""
+    node, commands, _ = _start(harness, goal_twist_timeout=0.2)
+    told = []
+    update = node.command_filter.update
+
+    def recording(target, positions=None, elapsed=None, feed_forward=False):
+        told.append(feed_forward)
+        return update(target, positions, elapsed, feed_forward)
+
+    node.command_filter.update = recording
+    angular, linear = np.array([0.0, 0.0, 0.3]), np.array([0.05, 0.0, -0.02])
+
+    def stream():
+        harness.publish("/joint_states", _joint_state(Q0))
+        harness.publish("/goal_twist", make_twist_stamped(angular, linear, "base_link"))
+
+    harness.publish("/goal_pose", make_pose_stamped(GOAL, "base_link"))
+    with_twist = _expected(GOAL, (angular, linear))
+    assert harness.spin_until(
+        lambda: commands and np.allclose(commands[-1].data, with_twist, atol=1e-7), 5, every=stream, period=0.005
+    )
+    told.clear()
+    harness.spin_for(0.05, every=stream, period=0.005)
+    assert told and all(told), told
+    # The twists stop: once goal_twist_timeout has passed the law is the pose error alone.
+    without = _expected(GOAL)
+    assert harness.spin_until(
+        lambda: np.allclose(commands[-1].data, without, atol=1e-7),
+        5,
+        every=lambda: harness.publish("/joint_states", _joint_state(Q0)),
+    )
+    told.clear()
+    harness.spin_for(0.05, every=lambda: harness.publish("/joint_states", _joint_state(Q0)))
+    assert told and not any(told), told
+
+
 def test_bad_goals_rejected_previous_goal_kept(harness, capfd):
     node, commands, _ = _start(harness)
     stream = lambda: harness.publish("/joint_states", _joint_state(Q0))  # noqa: E731
