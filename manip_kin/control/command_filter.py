@@ -25,7 +25,8 @@ line, a joint trajectory with velocities) is raised by what makes up the displac
 update cost (:meth:`CommandFilter._made_up`): the arm drove the held command meanwhile, and the
 jerk limit closes the lag late. Offline, with 2 % of the cycles late by 2-10 periods, the irb120
 line then left its segment by 0.06-0.10 mm instead of 0.15-0.31 mm in five of six runs, and by
-0.32 instead of 0.36 mm in the sixth, with a burst of late cycles (docs/performance_limits.md).
+0.30 instead of 0.36 mm in the sixth, with a burst of late cycles (docs/performance_limits.md).
+Late updates of more than :data:`MAKE_UP_LONGEST_GAP` (stalls) are left to the law's feedback.
 A pose goal's target is its feedback alone, which sees the loss and corrects it: nothing is made
 up there.
 

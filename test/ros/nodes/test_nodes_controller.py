@@ -168,7 +168,7 @@ def test_feed_forward_used_while_fresh(harness):
 def test_the_filter_is_told_while_the_law_follows_a_feed_forward(harness):
     """The command filter makes up what a late cycle cost only for a law that follows a moving
     reference (command_filter.py): a goal with a fresh twist says so, a goal alone does not."""
-    node, commands, _ = _start(harness, goal_twist_timeout=0.2)
+    node, commands, _ = _start(harness, goal_twist_timeout=0.5)
     told = []
     update = node.command_filter.update
 
