@@ -22,11 +22,11 @@ cycle, with ``A`` and ``J`` from :class:`~manip_kin.control.joint_limits.JointLi
 
 After a late update, a target that follows a moving reference (``feed_forward``: a streamed
 line, a joint trajectory with velocities) is raised by what makes up the displacement the late
-update cost (:meth:`CommandFilter._made_up`): the arm drove the held command meanwhile, and the
+update cost (:mod:`~manip_kin.control.late_updates`): the arm drove the held command meanwhile, and the
 jerk limit closes the lag late. Offline, with 2 % of the cycles late by 2-10 periods, the irb120
 line then left its segment by 0.06-0.10 mm instead of 0.15-0.31 mm in five of six runs, and by
 0.30 instead of 0.36 mm in the sixth, with a burst of late cycles (docs/performance_limits.md).
-Late updates of more than :data:`MAKE_UP_LONGEST_GAP` (stalls) are left to the law's feedback.
+Stalls (late updates of more than 30 ms) are left to the law's feedback.
 A pose goal's target is its feedback alone, which sees the loss and corrects it: nothing is made
 up there.
 
@@ -54,6 +54,7 @@ import numpy as np
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, RuckigError, Synchronization
 
 from manip_kin.control.joint_limits import JointLimits, stopping_distance
+from manip_kin.control.late_updates import LateUpdateMakeUp
 from manip_kin.control.streamed_goal import minmod
 from manip_kin.errors import InvalidArgumentError
 
@@ -64,20 +65,6 @@ _LANDED_ACCELERATION = 1e-9
 
 #: Ruckig takes finite acceleration bounds only: a joint without one gets this [rad/s² | m/s²].
 UNBOUNDED_ACCELERATION = 1e9
-
-#: A late cycle's lost displacement is made up over each joint's acceleration ramp time
-#: ``A/J`` [s], but over no fewer periods than this (a joint without a jerk limit). Shorter
-#: make-up times went unstable offline (docs/performance_limits.md).
-MAKE_UP_MIN_PERIODS = 10
-#: A make-up ends this long [s] after the last late update, whatever is left.
-MAKE_UP_LONGEST = 0.25
-#: ... or once every joint owes less than this [rad | m].
-MAKE_UP_DONE = 1e-7
-#: A stall longer than this [s] is not made up, and drops any debt: what the arm did meanwhile
-#: (held the command, or stopped at the hardware's command timeout) is not known well enough,
-#: and the law's feedback corrects it. Offline, stalls of 100-300 ms made up came out worse as
-#: often as better (docs/performance_limits.md).
-MAKE_UP_LONGEST_GAP = 0.03
 
 
 def time_optimal_step(error: float, jerk: float, dt: float) -> float:
@@ -133,11 +120,6 @@ class CommandFilter:
         self._acceleration = [0.0] * self.dof
         self._fd_acceleration = [0.0] * self.dof  # (v_k - v_k-1) / dt: what the limits bound
         self._previous_target: list[float] | None = None
-        # The law's last target before any make-up, and what a late cycle cost each joint [rad | m]
-        # (None: nothing owed), and since when [s] (see _made_up).
-        self._law_target: list[float] | None = None
-        self._owed: list[float] | None = None
-        self._owed_for = 0.0
         # The target's rate of change [rad/s² | m/s²] this update and the one before.
         self._target_rates = self._target_rate_before = [0.0] * self.dof
         self._ruckig = Ruckig(self.dof, self.dt)
@@ -163,8 +145,7 @@ class CommandFilter:
         self._accelerations = limits.acceleration.tolist()
         self._jerks = limits.jerk.tolist()
         self.filtering = limits.limits_acceleration
-        shortest = MAKE_UP_MIN_PERIODS * self.dt
-        self._make_up_times = [max(a / j, shortest) for a, j in zip(self._accelerations, self._jerks)]
+        self._make_up = LateUpdateMakeUp(self.dt, self._accelerations, self._jerks, self._velocity_limits)
         self._input.max_velocity = [v if math.isfinite(v) else UNBOUNDED_ACCELERATION for v in self._velocity_limits]
         self._input.max_acceleration = [min(a, UNBOUNDED_ACCELERATION) for a in self._accelerations]
         self._input.max_jerk = self._jerks
@@ -189,7 +170,7 @@ class CommandFilter:
         self._acceleration = [0.0] * self.dof
         self._fd_acceleration = [0.0] * self.dof
         self._previous_target = None
-        self._law_target = self._owed = None
+        self._make_up.reset()
         self._target_rates = self._target_rate_before = [0.0] * self.dof
         self._braking = {}
         self.result = FilterResult.AT_REST
@@ -206,10 +187,12 @@ class CommandFilter:
                 command may drive the arm for one period only.
             feed_forward: the target follows a reference that moves on its own (a streamed
                 line or joint trajectory with its velocity): the displacement a late update
-                cost is then made up (see :meth:`_made_up`). False for a law whose target is
+                cost is then made up (:mod:`~manip_kin.control.late_updates`). False for a law whose target is
                 its feedback alone (a pose goal): that law sees the loss and corrects it itself.
         """
-        target = self._made_up([float(v) for v in target], elapsed, feed_forward)
+        target = [float(v) for v in target]
+        if self.filtering:
+            target = self._make_up.raised(target, self._velocity, elapsed, feed_forward, bool(self.braking_joints))
         scale = 1.0
         for v, limit in zip(target, self._velocity_limits):
             if abs(v) * scale > limit:
@@ -263,55 +246,6 @@ class CommandFilter:
         else:
             self.result = FilterResult.LIMITED
         return self._velocity
-
-    def _made_up(self, target: list[float], elapsed: float | None, feed_forward: bool) -> list[float]:
-        """``target``, plus what makes up the displacement [rad | m] the last late update cost.
-
-        While an update is late the arm drives the last command, and the reference moves on;
-        after it the command can close the lag only at the jerk limit. A straight line then
-        leaves its segment (docs/performance_limits.md). From a late update on, each joint
-        counts what it owes: over the updates, the targets the law would have sent (ramping
-        from its last target to this one over the skipped periods) less the commands that
-        drove the arm. The target is raised by ``owed / T``, ``T`` the joint's make-up time
-        (:data:`MAKE_UP_MIN_PERIODS`, longer for a larger debt). The debt is dropped once paid,
-        :data:`MAKE_UP_LONGEST` after the last late update, after a stall longer than
-        :data:`MAKE_UP_LONGEST_GAP`, when the reference stops
-        (``feed_forward`` False), at a zero target (a halt), or when a joint brakes or the
-        raised target would pass a velocity limit (no more can be taken). The result goes
-        through the limits like any target.
-        """
-        previous_target, self._law_target = self._law_target, target
-        owed = self._owed
-        if not (feed_forward and self.filtering and previous_target is not None and any(target)):
-            self._owed = None
-            return target
-        dt = self.dt
-        periods = 1 if elapsed is None else max(1, round(elapsed / dt))
-        if owed is None:
-            if periods == 1:
-                return target
-            owed = [0.0] * self.dof
-        late = periods - 1
-        if late * dt > MAKE_UP_LONGEST_GAP:
-            self._owed = None
-            return target
-        self._owed_for = 0.0 if late else self._owed_for + dt
-        rows = zip(owed, target, previous_target, self._velocity)
-        owed = [o + dt * (periods * (p - v) + 0.5 * late * (t - p)) for o, t, p, v in rows]
-        paid = not late and max(map(abs, owed)) < MAKE_UP_DONE
-        # A braking joint cannot take more: what it owes would only come out past the brake.
-        if paid or self._owed_for > MAKE_UP_LONGEST or self.braking_joints:
-            self._owed = None
-            return target
-        self._owed = owed
-        # A larger debt takes longer: no less than the shortest jerk-limited move of that length,
-        # (32·|owed|/J)^(1/3); a fixed time overshot after gaps of 30 ms (offline: up to 2.4 mm).
-        rows = zip(target, owed, self._make_up_times, self._jerks)
-        raised = [t + o / max(time, (32.0 * abs(o) / jerk) ** (1.0 / 3.0)) for t, o, time, jerk in rows]
-        if any(abs(v) > limit for v, limit in zip(raised, self._velocity_limits)):
-            self._owed = None
-            return target
-        return raised
 
     def _landing(self, target: list[float], accelerations: list[float]) -> tuple[list[float], list[float]]:
         """The sample of a profile that ends within the period: on the target, with the target's

@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from manip_kin.control.command_filter import MAKE_UP_DONE, CommandFilter, FilterResult, time_optimal_step
+from manip_kin.control.command_filter import CommandFilter, FilterResult, time_optimal_step
 from manip_kin.control.joint_limits import JointLimit, JointLimits, default_joint_limits, stopping_distance
+from manip_kin.control.late_updates import MAKE_UP_DONE
 from manip_kin.core.robots import load_robot
 
 DT = 0.001
