@@ -22,8 +22,8 @@ cycle, with ``A`` and ``J`` from :class:`~manip_kin.control.joint_limits.JointLi
 
 After a late update, a target that follows a moving reference (``feed_forward``: a streamed
 line, a joint trajectory with velocities) is raised by what makes up the displacement the late
-update cost (:mod:`~manip_kin.control.late_updates`): the arm drove the held command meanwhile, and the
-jerk limit closes the lag late. Offline, with 2 % of the cycles late by 2-10 periods, the irb120
+update cost (:mod:`~manip_kin.control.late_updates`): the arm drove the held command
+meanwhile, and the jerk limit closes the lag late. Offline, with 2 % of the cycles late by 2-10 periods, the irb120
 line then left its segment by 0.06-0.10 mm instead of 0.15-0.31 mm in five of six runs, and by
 0.30 instead of 0.36 mm in the sixth, with a burst of late cycles (docs/performance_limits.md).
 Stalls (late updates of more than 30 ms) are left to the law's feedback.
@@ -187,8 +187,9 @@ class CommandFilter:
                 command may drive the arm for one period only.
             feed_forward: the target follows a reference that moves on its own (a streamed
                 line or joint trajectory with its velocity): the displacement a late update
-                cost is then made up (:mod:`~manip_kin.control.late_updates`). False for a law whose target is
-                its feedback alone (a pose goal): that law sees the loss and corrects it itself.
+                cost is then made up (:mod:`~manip_kin.control.late_updates`). False for a law
+                whose target is its feedback alone (a pose goal): that law sees the loss and
+                corrects it itself.
         """
         target = [float(v) for v in target]
         if self.filtering:

@@ -226,8 +226,8 @@ def test_what_late_cycles_cost_a_moving_reference_is_made_up_within_the_limits(s
     """A starved loop on a moving reference (``feed_forward``): the arm drives each command until
     the next update, so a late one costs displacement, and the jerk limit closes the lag late.
     The filter makes that up within the limits per update: once on time again, the commands
-    have driven what an on-time loop's drove, to a millionth of what a late cycle cost; without
-    the make-up the debt stays."""
+    have driven what an on-time loop's drove, to within a tenth of the debt and five times
+    MAKE_UP_DONE; without the make-up the debt stays."""
     limits = JointLimits.of(irb120())
     _, on_time = _ramp_driven(0.0, 1, seed, True)
     commands, made_up = _ramp_driven(late_fraction, late_periods, seed, True)
