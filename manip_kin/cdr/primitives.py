@@ -79,6 +79,16 @@ class CdrWriter:
         self.pack(_U32, len(encoded), alignment=4)
         self._body.extend(encoded)
 
+    def strings(self, texts) -> None:
+        """:meth:`string` of each of ``texts`` in turn (inlined: a status has ~80 of them)."""
+        body, pack = self._body, _U32.pack
+        for text in texts:
+            encoded = text.encode("utf-8")
+            body += b"\x00" * (-len(body) % 4)
+            body += pack(len(encoded) + 1)
+            body += encoded
+            body.append(0)
+
     def bytes(self) -> bytes:
         """The message: encapsulation header and payload."""
         return CDR_LE + bytes(self._body)

@@ -53,7 +53,6 @@ from manip_kin.ros.runtime.looping_node import LoopingNode
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
 from manip_kin.ros.wire.cdr import Float64ArrayCdr
-from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.messages import ns_to_stamp, stamp_key
 from manip_kin.ros.wire.topics import STREAM_DEPTH
 
@@ -382,8 +381,7 @@ class CartesianControllerNode(LoopingNode):
 
     def _publish_diagnostics(self, now_ns: int) -> None:
         level = self.diagnostic_level(self.supervisor.level)
-        status = make_diagnostic_status(self.status_name, level, self.state, self.model.name, status_values(self))
-        self._diagnostics_pub.publish(make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+        self.publish_status(level, self.state, status_values(self))
 
 
 def main(argv=None) -> int:

@@ -39,7 +39,7 @@ from manip_kin.ros.runtime.polling import RawSubscription, fast_path_problem
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
 from manip_kin.ros.runtime.usage import usage_text
-from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
+from manip_kin.ros.wire.diagnostics import diagnostic_array_cdr
 from manip_kin.ros.wire.topics import latest_state_qos
 from manip_kin.viz.live_feed import DEFAULT_VIEW_RATE_HZ, LIVE_TF_TOPICS, VIEW_TOPICS, Delivery, LiveFeed, ViewTopic
 
@@ -279,10 +279,16 @@ class LiveViewNode(Node):
             ("tf_source", tf_source),
             ("tf_failures", self._feed.tf_failures),
         ] + [(f"sent:{topic}", count) for topic, count in sorted(forwarded.items())]
-        status = make_diagnostic_status(
-            self.get_fully_qualified_name().lstrip("/"), "ok", "serving", "live_view", values
+        self._diagnostics_pub.publish(
+            diagnostic_array_cdr(
+                self.get_clock().now().nanoseconds,
+                self.get_fully_qualified_name().lstrip("/"),
+                "ok",
+                "serving",
+                "live_view",
+                values,
+            )
         )
-        self._diagnostics_pub.publish(make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
     def _check_live_tf(self) -> None:
         """Forward a node's own /tf (and stop synthesising) once one is published and tf2_msgs imports."""

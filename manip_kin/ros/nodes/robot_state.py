@@ -43,8 +43,6 @@ from manip_kin.ros.runtime.rate_loop import stats_key_values
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
 from manip_kin.ros.wire.cdr import JointStateCdr, PoseStampedCdr, TwistStampedCdr, decode_float64_array
-from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
-from manip_kin.ros.wire.messages import ns_to_stamp
 from manip_kin.ros.wire.scene_messages import TOPIC as COLLISION_OBJECTS
 from manip_kin.ros.wire.scene_messages import apply_marker_array
 from manip_kin.ros.wire.topics import STREAM_DEPTH, latest_state_qos
@@ -221,7 +219,7 @@ class RobotStateNode(LoopingNode):
 
         if self._diagnostics_period_ns and now_ns - self._last_diagnostics_ns >= self._diagnostics_period_ns:
             self._last_diagnostics_ns = now_ns
-            self._publish_diagnostics(ns_to_stamp(stamp_ns), now_ns)
+            self._publish_diagnostics(stamp_ns, now_ns)
 
     def _take_scene(self) -> None:
         """Apply new collision_objects arrays; the plant rebuilds its scene when it changed."""
@@ -263,7 +261,7 @@ class RobotStateNode(LoopingNode):
             ("efforts", ",".join(f"{e:.3f}" for e in self.plant.effort_values)),
         ], pair
 
-    def _publish_diagnostics(self, stamp, now_ns: int) -> None:
+    def _publish_diagnostics(self, stamp_ns: int, now_ns: int) -> None:
         plant, held = self.plant, self._held
         if held is None:
             command_state = "none yet"
@@ -284,8 +282,7 @@ class RobotStateNode(LoopingNode):
         values += contact + stats_key_values(self.loop.stats())
         level = self.diagnostic_level("warn" if limited or self.rejected_commands or pair else "ok")
         message = f"{command_state}; contact {pair}" if pair else command_state
-        status = make_diagnostic_status(self.status_name, level, message, self.model.name, values)
-        self._diagnostics_pub.publish(make_diagnostic_array(stamp, [status]))
+        self.publish_status(level, message, values, stamp_ns)
 
 
 def main(argv=None) -> int:

@@ -56,7 +56,6 @@ from manip_kin.ros.runtime.polling import PolledSubscription
 from manip_kin.ros.runtime.rate_loop import stats_key_values
 from manip_kin.ros.runtime.runner import run_node
 from manip_kin.ros.runtime.throttled_log import ThrottledLog
-from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
 from manip_kin.ros.wire.joint_messages import trajectory_points
 from manip_kin.ros.wire.messages import ns_to_stamp, pose_stamped_to_matrix, stamp_key, stamp_to_ns
 from manip_kin.ros.wire.topics import latest_state_qos
@@ -383,8 +382,7 @@ class TrajectoryGeneratorNode(LoopingNode):
             ("loop_error", self.loop_error()),
         ] + stats_key_values(self.loop.stats())
         level = self.diagnostic_level(supervisor.level)
-        status = make_diagnostic_status(self.status_name, level, supervisor.state, self.model.name, values)
-        self._diagnostics_pub.publish(make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
+        self.publish_status(level, supervisor.state, values)
 
 
 def main(argv=None) -> int:

@@ -19,6 +19,7 @@ from manip_kin.errors import OperationError
 from manip_kin.ros.runtime.polling import LoopWaiter, PolledSubscription, fast_path_problem
 from manip_kin.ros.runtime.rate_loop import RateLoop, stats_key_values
 from manip_kin.ros.runtime.throttled_log import ThrottledLog, safe_log
+from manip_kin.ros.wire.diagnostics import diagnostic_array_cdr
 from manip_kin.ros.wire.messages import ns_to_stamp, stamp_key
 
 
@@ -161,17 +162,22 @@ class LoopingNode(Node):
                 )
 
     def _publish_error_status(self, reason: str) -> None:
-        from manip_kin.ros.wire.diagnostics import make_diagnostic_array, make_diagnostic_status
-
-        publisher = getattr(self, "_diagnostics_pub", None)
-        if publisher is None:
+        if getattr(self, "_diagnostics_pub", None) is None:
             return
-        model = getattr(self, "model", None)
         values = [("state", "error"), ("loop_error", reason)] + stats_key_values(self.loop.stats())
-        status = make_diagnostic_status(
-            self.status_name, "error", f"cycle failed: {reason}", getattr(model, "name", ""), values
+        self.publish_status("error", f"cycle failed: {reason}", values)
+
+    def publish_status(self, level: str, message: str, values, stamp_ns: int | None = None) -> None:
+        """This node's status on ``_diagnostics_pub`` (``/diagnostics``): named :attr:`status_name`,
+        with the robot's name as hardware id, stamped ``stamp_ns`` [ns, ROS clock] or now; as
+        CDR bytes (:func:`~manip_kin.ros.wire.diagnostics.diagnostic_array_cdr`: the loop
+        publishes it in a cycle)."""
+        if stamp_ns is None:
+            stamp_ns = self.get_clock().now().nanoseconds
+        model = getattr(self, "model", None)
+        self._diagnostics_pub.publish(
+            diagnostic_array_cdr(stamp_ns, self.status_name, level, message, getattr(model, "name", ""), values)
         )
-        publisher.publish(make_diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
     def _on_loop_gave_up(self, reason: str) -> None:
         self.fatal_reason = reason

@@ -52,6 +52,8 @@ def test_rate_loop_runs_at_rate_survives_errors_and_stops():
     assert stats.errors == 1 and stats.cycles == count - 1 and stats.samples == count - 1
     assert stats.rate_hz == pytest.approx(1e9 / periods.mean(), rel=1e-12)
     assert stats.period_error_max_ms == pytest.approx(np.abs(periods - 5e6).max() * 1e-6, rel=1e-12)
+    rank = int(0.99 * (len(periods) - 1))
+    assert stats.period_error_p99_ms == pytest.approx(np.sort(np.abs(periods - 5e6))[rank] * 1e-6, rel=1e-12)
     assert stats.compute_mean_ms >= 0
     with pytest.raises(ValueError, match="rate"):
         RateLoop(0.0, cycle)

@@ -24,7 +24,13 @@ from manip_kin.ros.wire.cdr import (
     decode_pose_stamped,
     quaternion_of_pose_values,
 )
-from manip_kin.ros.wire.diagnostics import diagnostic_values, make_diagnostic_array, make_diagnostic_status
+from manip_kin.ros.wire.diagnostics import (
+    DIAGNOSTIC_LEVELS,
+    diagnostic_array_cdr,
+    diagnostic_values,
+    make_diagnostic_array,
+    make_diagnostic_status,
+)
 from manip_kin.ros.wire.messages import (
     array_to_multiarray,
     check_pose_stamped,
@@ -291,6 +297,43 @@ def test_diagnostic_helpers():
     assert diagnostic_values(status) == {"a": "1", "b": "x"}
     array_msg = make_diagnostic_array(Time(sec=3), [status])
     assert array_msg.header.stamp.sec == 3 and array_msg.status[0].name == "n"
+
+
+_TEXT = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=12)
+
+
+@given(
+    stamp_ns=st.integers(-(2**31) * 10**9, (2**31 - 1) * 10**9),
+    level=st.sampled_from(sorted(DIAGNOSTIC_LEVELS)),
+    texts=st.tuples(_TEXT, _TEXT, _TEXT),
+    values=st.lists(st.tuples(_TEXT, st.one_of(_TEXT, st.integers(), st.floats(allow_nan=False))), max_size=12),
+)
+def test_diagnostic_array_cdr_is_what_rclpy_makes_of_the_message(stamp_ns, level, texts, values):
+    """The status the nodes publish as bytes reads back as the message built the slow way: field
+    for field, and byte for byte but the padding (rclpy leaves its padding bytes unset)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    name, message, hardware_id = texts
+    data = diagnostic_array_cdr(stamp_ns, name, level, message, hardware_id, values)
+    sec, nanosec = divmod(stamp_ns, 10**9)
+    expected = make_diagnostic_array(
+        Time(sec=sec, nanosec=nanosec), [make_diagnostic_status(name, level, message, hardware_id, values)]
+    )
+    reference = serialize_message(expected)
+    assert len(data) == len(reference)
+    decoded = deserialize_message(data, DiagnosticArray)
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (sec, nanosec)
+    assert decoded.header.frame_id == ""
+    assert len(decoded.status) == 1
+    status = decoded.status[0]
+    assert (status.level, status.name, status.message, status.hardware_id) == (
+        DIAGNOSTIC_LEVELS[level],
+        name,
+        message,
+        hardware_id,
+    )
+    assert [(kv.key, kv.value) for kv in status.values] == [(str(k), str(v)) for k, v in values]
 
 
 def test_encode_values_paths_match_array_paths():
