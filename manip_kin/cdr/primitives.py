@@ -75,12 +75,11 @@ class CdrWriter:
         self._body.extend(packer.pack(*values))
 
     def string(self, text: str) -> None:
-        encoded = text.encode("utf-8") + b"\x00"
-        self.pack(_U32, len(encoded), alignment=4)
-        self._body.extend(encoded)
+        """A ``uint32`` length (the NUL counted), the UTF-8 bytes and a NUL."""
+        self.strings((text,))
 
     def strings(self, texts) -> None:
-        """:meth:`string` of each of ``texts`` in turn (inlined: a status has ~80 of them)."""
+        """:meth:`string` of each of ``texts`` in turn (one loop: a status has ~80 of them)."""
         body, pack = self._body, _U32.pack
         for text in texts:
             encoded = text.encode("utf-8")

@@ -52,8 +52,7 @@ from manip_kin.ros.runtime.throttled_log import safe_log
 
 __all__ = ["LoopStats", "RateLoop", "stats_key_values"]
 
-#: How often :meth:`RateLoop.stats` sorts for its 99th percentiles [ns]; in between it reports
-#: the last ones (the means, maxima and counts are always current).
+#: How often :meth:`RateLoop.stats` sorts for its 99th percentiles (the costliest part of a status) [ns].
 P99_REFRESH_NS = 1_000_000_000
 
 
@@ -64,8 +63,8 @@ class LoopStats:
     Attributes:
         target_rate_hz: configured rate [Hz].
         rate_hz: achieved rate over the window [Hz].
-        period_error_p99_ms: 99th percentile of ``|period - nominal|`` [ms]; this and
-            ``compute_p99_ms`` are refreshed at most every :data:`P99_REFRESH_NS`.
+        period_error_p99_ms: 99th percentile of ``|period - nominal|`` [ms] (and ``compute_p99_ms``:
+            sorted again at most every :data:`P99_REFRESH_NS`, otherwise the last ones).
         period_error_max_ms: largest ``|period - nominal|`` [ms].
         compute_mean_ms: mean time spent in the cycle function [ms].
         compute_p99_ms: 99th percentile of that time [ms].
@@ -153,8 +152,7 @@ class RateLoop:
         self._periods_ns = np.zeros(window, dtype=np.int64)
         self._compute_ns = np.zeros(window, dtype=np.int64)
         self._count = 0
-        self._p99s: tuple[float, float] | None = None  # (period error, compute) [ns], see stats()
-        self._p99s_ns = 0
+        self._p99s, self._p99s_ns = None, 0  # (period error, compute) [ns] and when, see stats()
         self._overruns = 0
         self._errors = 0
         self._woken = 0
@@ -342,48 +340,35 @@ class RateLoop:
     def stats(self) -> LoopStats:
         """Summary of the last ``window`` cycles."""
         count = min(self._count, self._periods_ns.shape[0])
+        counts = {
+            "target_rate_hz": self.rate_hz,
+            "cycles": self._count,
+            "overruns": self._overruns,
+            "errors": self._errors,
+            "samples": count,
+            "woken": self._woken,
+            "scheduling": self.scheduling,
+            "stalls": self._stalls,
+            "longest_cycle_ms": self._longest_ns * 1e-6,
+        }
         if count == 0:
-            return LoopStats(
-                target_rate_hz=self.rate_hz,
-                rate_hz=0.0,
-                period_error_p99_ms=0.0,
-                period_error_max_ms=0.0,
-                compute_mean_ms=0.0,
-                compute_p99_ms=0.0,
-                cycles=0,
-                overruns=self._overruns,
-                errors=self._errors,
-                samples=0,
-                woken=self._woken,
-                scheduling=self.scheduling,
-                stalls=self._stalls,
-                longest_cycle_ms=self._longest_ns * 1e-6,
-            )
+            timing = ("rate_hz", "period_error_p99_ms", "period_error_max_ms", "compute_mean_ms", "compute_p99_ms")
+            return LoopStats(**dict.fromkeys(timing, 0.0), **counts)
         periods = self._periods_ns[:count]
         compute = self._compute_ns[:count]
         error = np.abs(periods - self.period_ns)
         now_ns = time.monotonic_ns()
         if self._p99s is None or now_ns - self._p99s_ns >= P99_REFRESH_NS:
-            # np.partition: the order statistic without a full sort; still the costliest part of a
-            # status (0.1-0.25 ms), which the loop publishes in a cycle.
             p99 = int(0.99 * (count - 1))
             self._p99s = (float(np.partition(error, p99)[p99]), float(np.partition(compute, p99)[p99]))
             self._p99s_ns = now_ns
         return LoopStats(
-            target_rate_hz=self.rate_hz,
             rate_hz=float(1e9 / periods.mean()),
             period_error_p99_ms=self._p99s[0] * 1e-6,
             period_error_max_ms=float(error.max() * 1e-6),
             compute_mean_ms=float(compute.mean() * 1e-6),
             compute_p99_ms=self._p99s[1] * 1e-6,
-            cycles=self._count,
-            overruns=self._overruns,
-            errors=self._errors,
-            samples=count,
-            woken=self._woken,
-            scheduling=self.scheduling,
-            stalls=self._stalls,
-            longest_cycle_ms=self._longest_ns * 1e-6,
+            **counts,
         )
 
 
