@@ -13,6 +13,7 @@ __all__ = ["CDR_LE", "CdrLayout", "CdrReader", "CdrWriter", "align", "stamp_part
 CDR_LE = b"\x00\x01\x00\x00"
 _NS_PER_S = 1_000_000_000
 _U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
 
 
 def align(offset: int, size: int) -> int:
@@ -73,6 +74,14 @@ class CdrWriter:
         """``values`` by ``packer`` (little endian), aligned to ``alignment`` bytes."""
         self.pad(alignment)
         self._body.extend(packer.pack(*values))
+
+    def count(self, length: int) -> None:
+        """A sequence's length (``uint32``), before its elements."""
+        self.pack(_U32, length, alignment=4)
+
+    def stamp(self, stamp_ns: int) -> None:
+        """A ``builtin_interfaces/Time`` (sec, nanosec) of a time [ns]."""
+        self.pack(_STAMP, *stamp_parts(stamp_ns), alignment=4)
 
     def string(self, text: str) -> None:
         """A ``uint32`` length (the NUL counted), the UTF-8 bytes and a NUL."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 
-from manip_kin.cdr import CdrReader, CdrWriter, stamp_parts
+from manip_kin.cdr import CdrReader, CdrWriter
 from manip_kin.core.tf_tree import LinkTransform
 from manip_kin.recording.qos import OfferedProfiles, default_offer
 
@@ -21,8 +21,6 @@ TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 
-_STAMP = struct.Struct("<iI")
-_COUNT = struct.Struct("<I")
 _SEVEN_DOUBLES = struct.Struct("<7d")
 
 
@@ -43,11 +41,10 @@ def tf_offer(static: bool) -> OfferedProfiles:
 
 def encode_tf_message(stamp_ns: int, transforms: Sequence[LinkTransform]) -> bytes:
     """CDR bytes of a TFMessage whose every transform is stamped ``stamp_ns`` [ns since epoch]."""
-    sec, nanosec = stamp_parts(stamp_ns)
     writer = CdrWriter()
-    writer.pack(_COUNT, len(transforms), alignment=4)
+    writer.count(len(transforms))
     for transform in transforms:
-        writer.pack(_STAMP, sec, nanosec, alignment=4)
+        writer.stamp(stamp_ns)
         writer.string(transform.parent)
         writer.string(transform.child)
         x, y, z = (float(v) for v in transform.translation)

@@ -13,7 +13,7 @@ import struct
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from manip_kin.cdr import CdrWriter, stamp_parts
+from manip_kin.cdr import CdrWriter
 
 #: DiagnosticStatus levels by name (diagnostic_msgs/DiagnosticStatus constants).
 DIAGNOSTIC_LEVELS = {"ok": b"\x00", "warn": b"\x01", "error": b"\x02", "stale": b"\x03"}
@@ -46,27 +46,26 @@ def make_diagnostic_array(stamp: Time, statuses) -> DiagnosticArray:
     return msg
 
 
-_STAMP = struct.Struct("<iI")
-_COUNT = struct.Struct("<I")
 _LEVEL = struct.Struct("<c")
 
 
 def diagnostic_array_cdr(stamp_ns: int, name: str, level: str, message: str, hardware_id: str, values) -> bytes:
-    """The serialised ``DiagnosticArray`` (empty frame_id) of one status: the bytes rclpy makes of
-    ``make_diagnostic_array(stamp, [make_diagnostic_status(name, level, message, hardware_id, values)])``.
+    """The serialised ``DiagnosticArray`` (empty frame_id) of one status: what rclpy makes of
+    ``make_diagnostic_array(stamp, [make_diagnostic_status(name, level, message, hardware_id, values)])``,
+    but with zero padding bytes (rclpy leaves them unset).
 
     Args:
         stamp_ns: the header's stamp [ns, ROS clock].
         name, level, message, hardware_id, values: as :func:`make_diagnostic_status`.
     """
     writer = CdrWriter()
-    writer.pack(_STAMP, *stamp_parts(stamp_ns), alignment=4)
+    writer.stamp(stamp_ns)
     writer.string("")  # header.frame_id
-    writer.pack(_COUNT, 1, alignment=4)  # one status
+    writer.count(1)  # one status
     writer.pack(_LEVEL, DIAGNOSTIC_LEVELS[level], alignment=1)
     writer.strings((name, message, hardware_id))
     pairs = [(str(key), str(value)) for key, value in values]
-    writer.pack(_COUNT, len(pairs), alignment=4)
+    writer.count(len(pairs))
     writer.strings([text for pair in pairs for text in pair])
     return writer.bytes()
 
