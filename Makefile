@@ -29,6 +29,7 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py package.xml
 	$(VPY) -m pip install --quiet --upgrade pip "setuptools>=64,<80" wheel
 	$(VPY) -m pip install --quiet -r requirements-dev.txt
 	$(VPY) -m pip install --quiet --no-deps -e .
+	$(VPY) -m manip_kin.collision.narrow_phase
 	touch $(STAMP)
 
 demo: $(STAMP)

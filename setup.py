@@ -10,6 +10,8 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
+    # The C++ backends are compiled where they run (manip_kin/codegen/native.py), from their source.
+    package_data={PACKAGE: ["collision/*.cpp"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -17,7 +19,7 @@ setup(
         (f"share/{PACKAGE}/config/robots", glob("config/robots/*")),
     ],
     install_requires=["setuptools"],
-    zip_safe=True,
+    zip_safe=False,  # narrow_phase.cpp is compiled from the installed file
     maintainer="manip_kin developers",
     maintainer_email="dev@manip-kin.invalid",
     description="Kinematic control of serial manipulators for ROS 2 Jazzy.",

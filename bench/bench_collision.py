@@ -9,6 +9,8 @@ Panda's ready pose towards goals that pass near a sphere, beside a post and abov
 so the pairs within the influence distance, the damper rows and the QP solves are those of a
 running controller. Each cycle is timed on its own (p99 needs single cycles, not block means);
 the plain step is timed in the same loop, interleaved, so the two share the machine's state.
+So is the collision-aware step with the Python narrow phase (``native=False``), on the same
+states: its rates must equal the native one's (``largest_qdot_difference``).
 Besides wall time, each cycle's thread CPU time is reported (``cpu_*``): on this shared
 machine preemption puts milliseconds into the wall-clock tail that are not the step's.
 
@@ -79,24 +81,33 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
     checker = CollisionChecker(model, collision)
     checker.update_scene(scene)
     aware = QpController(model, checker=checker)
+    # The same law with the Python narrow phase, stepped on the same states: what the native one saves.
+    python_checker = CollisionChecker(model, collision, native=False)
+    python_checker.update_scene(scene)
+    aware_python = QpController(model, checker=python_checker)
     no_geometry = QpController(model)
     plain = CartesianController(model)
     clock, cpu_clock = time.perf_counter_ns, time.thread_time_ns
-    timings: dict[str, list[int]] = {"aware": [], "no_geometry": [], "plain": []}
-    cpu: dict[str, list[int]] = {"aware": [], "no_geometry": [], "plain": []}
+    laws = (("aware", aware), ("aware_python", aware_python), ("no_geometry", no_geometry), ("plain", plain))
+    timings: dict[str, list[int]] = {name: [] for name, _ in laws}
+    cpu: dict[str, list[int]] = {name: [] for name, _ in laws}
     solved = rows = cycles = 0
+    largest_difference = 0.0
     q = PANDA_READY.copy()
     for offset in GOAL_OFFSETS:
         goal = frame_pose(model, PANDA_READY, "ee")
         goal[:3, 3] += offset
         for _ in range(steps_per_goal):
-            for name, law in (("aware", aware), ("no_geometry", no_geometry), ("plain", plain)):
+            results = {}
+            for name, law in laws:
                 cpu_start, start = cpu_clock(), clock()
-                result = law.step(q, goal, dt=0.001)
+                results[name] = law.step(q, goal, dt=0.001)
                 timings[name].append(clock() - start)
                 cpu[name].append(cpu_clock() - cpu_start)
-                if law is aware:
-                    output = result
+            output = results["aware"]
+            largest_difference = max(
+                largest_difference, float(np.abs(output.qdot - results["aware_python"].qdot).max())
+            )
             solved += output.status is not SolveStatus.UNCONSTRAINED
             rows += len(output.active_constraints)
             cycles += 1
@@ -108,6 +119,13 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
         active_constraints_per_cycle=rows / cycles,
         fallbacks=aware.fallback_count,
         cycles=cycles,
+        narrow_phase=checker.narrow_phase.name,
+    )
+    python_row = _percentiles(timings["aware_python"], cpu["aware_python"])
+    python_row.update(
+        median_ratio_to_native=python_row["median_us"] / aware_row["median_us"],
+        p99_ratio_to_native=python_row["p99_us"] / aware_row["p99_us"],
+        largest_qdot_difference=largest_difference,
     )
     return [
         {
@@ -115,6 +133,12 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
             **aware_row,
             "target": "p99 ≤ 250 µs, ≤ 30 % of a core at 1 kHz",
             "reference": "MoveIt Servo checks collisions at 10 Hz",
+        },
+        {
+            "metric": "collision-aware QP step panda, Python narrow phase (same states, interleaved)",
+            **python_row,
+            "target": "",
+            "reference": f"the row above with the {checker.narrow_phase.name} narrow phase",
         },
         {
             "metric": "QP step panda without geometry (joint limits only)",

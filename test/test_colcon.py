@@ -44,3 +44,13 @@ def test_installed_cli_finds_robots_through_the_ament_index(colcon_install):
         timeout=60,
     )
     assert fk.returncode == 0 and '"frame": "tool"' in fk.stdout
+
+
+def test_the_installed_package_builds_its_native_narrow_phase(colcon_install):
+    # The C++ source is package data: the installed package compiles it where it runs.
+    code = "from manip_kin.collision.narrow_phase import native_problem; print(repr(native_problem()))"
+    result = subprocess.run(
+        [sys.executable, "-c", code], env=colcon_install.env, capture_output=True, text=True, timeout=300, cwd="/"
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "''"

@@ -129,7 +129,7 @@ def run_check(args: argparse.Namespace) -> int:
     collision_model = load_collision_model(
         model, srdf=args.srdf, mesh_search_path=args.mesh_search_path, samples=args.samples
     )
-    pairs = CollisionChecker(model, collision_model).link_distances(q)
+    pairs = CollisionChecker(model, collision_model, native=False).link_distances(q)  # one query
     collides = bool(pairs) and pairs[0].distance <= 0.0
     shown = pairs[: args.count]
     if args.json:

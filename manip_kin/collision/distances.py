@@ -1,7 +1,7 @@
 """Distances every control cycle: the pairs within an influence distance and their damper rows.
 
-:class:`CollisionChecker` holds one robot's collision model and the scene's obstacles (as
-coal shapes, rebuilt only when ``scene.version`` moves). Each cycle
+:class:`CollisionChecker` holds one robot's collision model and the scene's obstacles (their
+shapes rebuilt only when ``scene.version`` moves). Each cycle
 (:meth:`CollisionChecker.evaluate`):
 
 1. every frame and joint twist (one generated function) and the pose of every shape (one
@@ -12,8 +12,10 @@ coal shapes, rebuilt only when ``scene.version`` moves). Each cycle
    (:func:`~manip_kin.collision.geometry.joint_reach`); while that bound has not spent
    :data:`BAND`, only the pairs within ``d_i + BAND`` at the last full pass are looked at,
    and a pair found beyond ``d_i`` plus what is left of the band is not looked at again;
-3. coal computes the distance ``d`` and witness points ``p_a``, ``p_b`` of the others
-   (convex shapes: about 1.3 µs a pair; negative ``d`` is the penetration depth);
+3. the narrow phase (:mod:`~manip_kin.collision.narrow_phase`: coal, from C++ where that can be
+   built, else through its Python bindings) computes the distance ``d`` and witness points
+   ``p_a``, ``p_b`` of the others (convex shapes: about 1 µs a pair from C++; negative ``d`` is
+   the penetration depth);
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
 
        n·(J_a(p_a) - J_b(p_b)) q̇  <=  ξ (d - d_s) / (d_i - d_s)
@@ -36,6 +38,7 @@ import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
 from manip_kin.collision.geometry import CollisionShape, frames_and_twists, joint_reach, obstacle_shape, sphere_centres
+from manip_kin.collision.narrow_phase import ROW_WIDTH, PythonNarrowPhase, make_narrow_phase
 from manip_kin.core.model import RobotModel
 from manip_kin.core.scene import Scene
 from manip_kin.errors import ModelFileError
@@ -43,6 +46,7 @@ from manip_kin.errors import ModelFileError
 #: Pairs this far beyond the cutoff [m] are checked every cycle too, so that the others can be
 #: left out for the cycles it takes the joints to spend it (see :meth:`CollisionChecker._near_pairs`).
 BAND = 0.005
+_NO_COLUMNS = np.zeros((0, ROW_WIDTH))
 
 
 def obstacle_name(key: tuple[str, int]) -> str:
@@ -110,12 +114,13 @@ class CollisionChecker:
         model: the robot.
         collision_model: its shapes and self-collision pairs.
         mesh_search_path: for ``package://`` mesh obstacles.
+        native: use the native narrow phase where it can be built
+            (:func:`~manip_kin.collision.narrow_phase.make_narrow_phase`; the same answers, faster).
     """
 
-    def __init__(self, model: RobotModel, collision_model: CollisionModel, mesh_search_path: str = ""):
-        import coal
-
-        self._coal = coal
+    def __init__(
+        self, model: RobotModel, collision_model: CollisionModel, mesh_search_path: str = "", native: bool = True
+    ):
         self.model = model
         self.collision_model = collision_model
         self.mesh_search_path = mesh_search_path
@@ -129,11 +134,11 @@ class CollisionChecker:
         )
         geometries = collision_model.geometries
         self._robot_count = len(geometries)
-        self._robot_shapes = [g.shape.coal_shape for g in geometries]
         self._robot_names = [g.link for g in geometries]
         self._robot_frames = [g.frame for g in geometries]
-        self._robot_transforms = [coal.Transform3s() for _ in geometries]
-        self._request, self._result = coal.DistanceRequest(), coal.DistanceResult()
+        #: The narrow phase (native or Python, see :mod:`manip_kin.collision.narrow_phase`) and
+        #: why it is not the native one ("" when it is).
+        self.narrow_phase, self.narrow_phase_problem = make_narrow_phase([g.shape for g in geometries], native)
         self._scene_version: int | None = None
         #: Why obstacles of the last scene taken were left out (empty: all were taken).
         self.scene_problems: tuple[str, ...] = ()
@@ -164,20 +169,17 @@ class CollisionChecker:
 
     def _set_obstacles(self, obstacles: Sequence, shapes: Sequence[CollisionShape]) -> None:
         """One table of shapes (robot, then obstacles) and pairs (self, then robot-obstacle)."""
-        coal, cm, count = self._coal, self.collision_model, self._robot_count
+        cm, count = self.collision_model, self._robot_count
         self._obstacle_count = len(obstacles)
-        self._shapes = self._robot_shapes + [s.coal_shape for s in shapes]
         self._names = self._robot_names + [obstacle_name(o.key) for o in obstacles]
         self._frames = self._robot_frames + [0] * len(obstacles)
-        self._transforms = self._robot_transforms + [
-            coal.Transform3s(o.pose_in_base[:3, :3], o.pose_in_base[:3, 3]) for o in obstacles
-        ]
         poses = np.array([o.pose_in_base for o in obstacles]).reshape(-1, 4, 4)
         self._obstacle_centres = sphere_centres(poses, np.array([s.centre for s in shapes]).reshape(-1, 3))
         radii = np.concatenate([cm.radii, [s.radius for s in shapes]])
         moving = np.flatnonzero(cm.frames > 0)
         grid = [(g, count + o) for o in range(len(obstacles)) for g in moving]
         pairs = np.concatenate([cm.self_pairs, np.array(grid, dtype=int).reshape(-1, 2)])
+        self._pairs = pairs
         first, second = pairs[:, 0], pairs[:, 1]
         self._first_list, self._second_list = first.tolist(), second.tolist()
         self._radius_sums = radii[first] + radii[second]
@@ -194,16 +196,21 @@ class CollisionChecker:
         for column in (first, second):
             robot = column < count
             self._pair_sums[column[robot], rows[robot]] += 1.0
-        self._pair_differences = np.zeros((len(pairs), len(self._shapes)))
+        self._pair_differences = np.zeros((len(pairs), count + len(obstacles)))
         self._pair_differences[rows, first] = 1.0
         self._pair_differences[rows, second] -= 1.0
-        self._centres = np.zeros((len(self._shapes), 3))
+        self._centres = np.zeros((count + len(obstacles), 3))
         self._centres[count:] = self._obstacle_centres
         # |Δq| @ _reach_pairs bounds how much each pair's distance can fall (see _near_pairs). A
         # joint that moves both shapes of a pair moves them as one body: it leaves their distance.
         reach = joint_reach(self.model, cm.frames, cm.offsets, cm.centres, cm.radii) @ self._pair_sums
         self._reach_pairs = reach * (1.0 - self._moves_first * self._moves_second).T
-        self._functors = [coal.ComputeDistance(self._shapes[a], self._shapes[b]) for a, b in pairs.tolist()]
+        try:
+            self.narrow_phase.set_scene(shapes, poses, pairs)
+        except ValueError as error:  # the native one could not take a shape coal's Python bindings could
+            self.narrow_phase_problem = str(error)
+            self.narrow_phase = PythonNarrowPhase([g.shape for g in cm.geometries])
+            self.narrow_phase.set_scene(shapes, poses, pairs)
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
         # The configuration of the last call, and per joint the sum of |Δq| since the last
@@ -220,6 +227,12 @@ class CollisionChecker:
         self._reach_most = self._reach_pairs.max(axis=1, initial=0.0).tolist()
 
     @property
+    def shape_pairs(self) -> np.ndarray:
+        """The checked pairs as shape indices ``(first, second)``: robot shapes in the collision
+        model's order, then the obstacles taken; shape (P, 2)."""
+        return self._pairs
+
+    @property
     def obstacle_count(self) -> int:
         """Obstacles currently taken from the scene."""
         return self._obstacle_count
@@ -232,9 +245,10 @@ class CollisionChecker:
         frames, self._twists = frames_and_twists(self.model, q)
         return np.matmul(frames[self.collision_model.frames, :3], self._offsets_and_centres)
 
-    def _near_pairs(self, q: np.ndarray, cutoff: float) -> list[tuple[int, float, np.ndarray, np.ndarray, np.ndarray]]:
-        """``(pair row, distance, point on first, point on second, normal)`` of the pairs nearer
-        than ``cutoff``; updates the lower bounds (see :meth:`pair_distances`).
+    def _near_pairs(self, q: np.ndarray, cutoff: float) -> tuple[list[int], np.ndarray]:
+        """The pair rows nearer than ``cutoff`` and their narrow-phase columns (distance, witness
+        points, normal, damper features: :mod:`~manip_kin.collision.narrow_phase`), shape
+        (k, 22); updates the lower bounds (see :meth:`pair_distances`).
 
         Since the last call each shape moved by at most ``Σ_j |Δq_j| · reach[j]``
         (:func:`~manip_kin.collision.geometry.joint_reach`, whatever the path between the two
@@ -265,48 +279,30 @@ class CollisionChecker:
             self._near_cutoff, self._budget = cutoff, BAND
         self.pairs_computed = len(rows)
         if not rows:
-            return []
+            return [], _NO_COLUMNS
+        columns = self.narrow_phase.compute(placed, rows, cutoff)
+        distances = columns[:, 0]
+        lower[rows] = distances
         # A pair found at cutoff + budget or beyond cannot come within the cutoff before the
         # budget is spent (it is what the pair may still come nearer): it leaves the near rows,
         # so a still arm computes only the pairs it must.
-        beyond = cutoff + self._budget
-        near = []
-        transforms, count = self._transforms, self._robot_count
-        done = [False] * count
-        first, second = self._first_list, self._second_list
-        functors, request, result = self._functors, self._request, self._result
-        found = []
-        for row in rows:
-            a, b = first[row], second[row]
-            if not done[a]:
-                transforms[a].setTransform(placed[a, :, :3], placed[a, :, 3])
-                done[a] = True
-            if b < count and not done[b]:
-                transforms[b].setTransform(placed[b, :, :3], placed[b, :, 3])
-                done[b] = True
-            result.clear()
-            distance = functors[row](transforms[a], transforms[b], request, result)
-            lower[row] = distance
-            if distance < beyond:
-                near.append(row)
-            if distance < cutoff:
-                # The witness points come back as copies; the normal is a view into the result.
-                found.append(
-                    (row, distance, result.getNearestPoint1(), result.getNearestPoint2(), result.normal.tolist())
-                )
-        self._near_rows = near
-        return found
+        near = (distances < cutoff + self._budget).tolist()
+        self._near_rows = [row for row, keep in zip(rows, near) if keep]
+        found = (distances < cutoff).tolist()
+        if all(found):
+            return rows, columns
+        return [row for row, keep in zip(rows, found) if keep], columns[found]
 
-    def _pair(self, found: tuple) -> PairDistance:
-        row, distance, point_first, point_second, normal = found
+    def _pair(self, row: int, columns: np.ndarray) -> PairDistance:
+        """The :class:`PairDistance` of pair ``row`` from its narrow-phase columns."""
         names = self._names
         return PairDistance(
             names[self._first_list[row]],
             names[self._second_list[row]],
-            distance,
-            point_first,
-            point_second,
-            np.array(normal),
+            float(columns[0]),
+            columns[1:4].copy(),
+            columns[4:7].copy(),
+            columns[7:10].copy(),
         )
 
     def pair_distances(self, q: np.ndarray, cutoff: float = math.inf) -> list[PairDistance]:
@@ -318,7 +314,8 @@ class CollisionChecker:
         Between nearby configurations (a control loop, a sampled path) most far pairs are
         therefore computed once and skipped afterwards.
         """
-        return [self._pair(found) for found in self._near_pairs(q, cutoff)]
+        rows, columns = self._near_pairs(q, cutoff)
+        return [self._pair(row, line) for row, line in zip(rows, columns)]
 
     def link_distances(self, q: np.ndarray) -> list[PairDistance]:
         """The distance of every checked link pair and link-obstacle pair (the nearest of their
@@ -339,32 +336,30 @@ class CollisionChecker:
             safety_distance: ``d_s`` [m], >= 0.
             gain: ``ξ`` [m/s], > 0: the closing speed allowed at ``d_i``.
         """
-        found = self._near_pairs(q, influence_distance)
-        if not found:
+        rows, columns = self._near_pairs(q, influence_distance)
+        if not rows:
             return DamperRows((), np.zeros(0), np.zeros((0, self.model.dof)), np.zeros(0), None)
-        rows = [item[0] for item in found]
-        distances = np.fromiter([item[1] for item in found], float, len(found))
+        distances = columns[:, 0].copy()
         bound = gain * (distances - safety_distance) / (influence_distance - safety_distance)
         labels = self._labels
-        nearest = self._pair(min(found, key=lambda item: item[1]))
-        return DamperRows(tuple(labels[row] for row in rows), distances, self._damper_matrix(found), bound, nearest)
+        nearest = int(np.argmin(distances))
+        return DamperRows(
+            tuple(labels[row] for row in rows),
+            distances,
+            self._damper_matrix(rows, columns),
+            bound,
+            self._pair(rows[nearest], columns[nearest]),
+        )
 
-    def _damper_matrix(self, found: list[tuple]) -> np.ndarray:
-        """``n·(J_a(p_a) − J_b(p_b))`` per pair of ``found`` (see :meth:`_near_pairs`) at the ``q``
-        of the last query, shape (k, n).
+    def _damper_matrix(self, rows: list[int], columns: np.ndarray) -> np.ndarray:
+        """``n·(J_a(p_a) − J_b(p_b))`` of each pair of ``rows`` (their narrow-phase columns
+        ``columns``) at the ``q`` of the last query, shape (k, n).
 
         A point ``p`` moving with joint j has the velocity ``v_j + ω_j × p`` per unit rate
         (``[ω_j; v_j]`` the joint's twist), so ``n·J(p)`` column j is ``(p × n)·ω_j + n·v_j``:
-        the rows ``[p × n, n]`` of both sides (plain floats: a handful of products per pair)
-        times the (6, n) twists, one product.
+        the features ``[p × n, n]`` of both sides times the (6, n) twists.
         """
-        k = len(found)
-        features: list[float] = []
-        for side in (2, 3):
-            for item in found:
-                px, py, pz = item[side].tolist()
-                nx, ny, nz = item[4]
-                features += (py * nz - pz * ny, pz * nx - px * nz, px * ny - py * nx, nx, ny, nz)
-        rows = [item[0] for item in found]
-        velocity = np.fromiter(features, float, 12 * k).reshape(2 * k, 6) @ self._twists  # (2k, n)
-        return velocity[:k] * self._moves_first[rows] - velocity[k:] * self._moves_second[rows]
+        twists = self._twists
+        return (columns[:, 10:16] @ twists) * self._moves_first[rows] - (
+            columns[:, 16:22] @ twists
+        ) * self._moves_second[rows]

@@ -11,6 +11,7 @@ answer, at the same distance.
 import coal
 import numpy as np
 import pytest
+from collision_robots import fresh_coal_distance
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -32,16 +33,7 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
     pairs += [(a, b) for b in obstacles for a in robot if a[3] > 0]  # shapes on the base never meet obstacles
     found = []
     for (name_a, shape_a, pose_a, _), (name_b, shape_b, pose_b, _) in pairs:
-        result = coal.DistanceResult()
-        distance = coal.distance(
-            shape_a,
-            coal.Transform3s(pose_a[:3, :3], pose_a[:3, 3]),
-            shape_b,
-            coal.Transform3s(pose_b[:3, :3], pose_b[:3, 3]),
-            coal.DistanceRequest(),
-            result,
-        )
-        found.append((f"{name_a}-{name_b}", distance))
+        found.append((f"{name_a}-{name_b}", fresh_coal_distance(shape_a, pose_a, shape_b, pose_b)[0]))
     return found
 
 

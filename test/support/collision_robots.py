@@ -99,3 +99,18 @@ def fresh_hand_link1_distance(model, q) -> float:
     transforms = [coal.Transform3s(p[:3, :3], p[:3, 3]) for p in poses]
     result = coal.DistanceResult()
     return coal.distance(shapes[0], transforms[0], shapes[1], transforms[1], coal.DistanceRequest(), result)
+
+
+def fresh_coal_distance(shape_a, pose_a, shape_b, pose_b) -> tuple[float, coal.DistanceResult]:
+    """The distance of two coal shapes at poses in base (shape (4, 4)), with fresh coal objects, and
+    coal's result (witness points, normal)."""
+    result = coal.DistanceResult()
+    distance = coal.distance(
+        shape_a,
+        coal.Transform3s(pose_a[:3, :3], pose_a[:3, 3]),
+        shape_b,
+        coal.Transform3s(pose_b[:3, :3], pose_b[:3, 3]),
+        coal.DistanceRequest(),
+        result,
+    )
+    return distance, result

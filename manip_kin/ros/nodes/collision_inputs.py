@@ -42,7 +42,7 @@ from manip_kin.control.qp.law import QpConfig, QpController, QpJointOutput, QpOu
 from manip_kin.control.qp.tasks import PostureTask
 from manip_kin.control.resolved_rate import CartesianController
 from manip_kin.core.scene import Scene
-from manip_kin.ros.nodes.scene_input import SCENE_VERDICT_KEYS, SceneInput, node_collision_model
+from manip_kin.ros.nodes.scene_input import SCENE_VERDICT_KEYS, SceneInput, node_collision_checker, node_collision_model
 from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Seconds of pose (or joint) steps :func:`blocked_by` looks at, and how often it looks [ns].
@@ -102,7 +102,7 @@ class CollisionInputs:
         if not self.enabled:
             return
         collision_model = node_collision_model(node, params, "collision_avoidance", params.collision_pair_samples)
-        self.checker = CollisionChecker(node.model, collision_model, params.mesh_search_path)
+        self.checker = node_collision_checker(node, collision_model, params)
         self.scene_input = SceneInput(node, self.checker, warn)
         self._marker_pub = node.create_publisher(MarkerArray, "markers", 10)
         node.get_logger().info(
@@ -225,7 +225,7 @@ class CollisionInputs:
         else:  # no scene is taken: the same keys, nothing in them
             scene = [("obstacles", "0"), ("rejected_obstacles", "0")] + [(key, "") for key in SCENE_VERDICT_KEYS]
         if self.law is None or not isinstance(output, QpReport):
-            keys = ("nearest_pair", "nearest_distance", "nearest_points", "qp_status", "qp_fallbacks")
+            keys = ("nearest_pair", "nearest_distance", "nearest_points", "qp_status", "qp_fallbacks", "narrow_phase")
             return [(key, "") for key in (*keys, "active_constraints", "collision_safety_distance")] + scene
         nearest = self._nearest(output)
         self._publish_marker(stamp, nearest)
@@ -236,6 +236,7 @@ class CollisionInputs:
             ("nearest_points", points),
             ("qp_status", str(output.status)),
             ("qp_fallbacks", str(output.fallback_count)),
+            ("narrow_phase", self.checker.narrow_phase.name if self.checker is not None else ""),
             ("active_constraints", ",".join(output.active_constraints)),
             ("collision_safety_distance", f"{self.law.qp.config.collision_safety_distance:g}"),
             *scene,

@@ -17,9 +17,8 @@ import math
 
 import numpy as np
 
-from manip_kin.collision.distances import CollisionChecker
 from manip_kin.collision.path import first_collision_along
-from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_model
+from manip_kin.ros.nodes.scene_input import SceneInput, node_collision_checker, node_collision_model
 from manip_kin.ros.runtime.param_struct import ParamStruct
 
 #: Joint travel between two samples of a joint trajectory [rad | m], and the most samples.
@@ -48,7 +47,7 @@ class PathCheck:
         if not self.enabled:
             return
         self.collision_model = node_collision_model(node, params, "collision_check")
-        self.checker = CollisionChecker(node.model, self.collision_model, params.mesh_search_path)
+        self.checker = node_collision_checker(node, self.collision_model, params)
         self.scene_input = SceneInput(node, self.checker, warn)
         node.get_logger().info(
             f"collision check of every motion: {len(self.collision_model.pairs.checked)} link pairs, "

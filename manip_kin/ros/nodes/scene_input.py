@@ -3,6 +3,7 @@
 * :func:`node_collision_model`: the robot's collision model from the URDF the node's model
   came from (the ``robot`` file, or the text on ``robot_description``); a bundled robot or a
   robot YAML has no geometry and is refused;
+* :func:`node_collision_checker`: its checker, with a log line of the narrow phase it runs;
 * :class:`SceneInput`: ``collision_objects`` polled by the loop thread, every queued array
   applied in order (markers are incremental: ADD, DELETE, DELETEALL), refusals logged
   throttled, and the checker given the scene in the same thread (nothing in a callback touches
@@ -18,6 +19,7 @@ from visualization_msgs.msg import MarkerArray
 
 from manip_kin.collision.collision_model import CollisionModel, load_collision_model
 from manip_kin.collision.distances import CollisionChecker
+from manip_kin.collision.narrow_phase import native_build_pending
 from manip_kin.core.robot_files import is_urdf_file
 from manip_kin.core.scene import Scene
 from manip_kin.errors import InvalidArgumentError
@@ -67,6 +69,18 @@ def node_collision_model(node, params: ParamStruct, feature: str, samples: int |
         mesh_search_path=params.mesh_search_path,
         **options,
     )
+
+
+def node_collision_checker(node, collision_model: CollisionModel, params: ParamStruct) -> CollisionChecker:
+    """The node's :class:`CollisionChecker`, and a log line saying which narrow phase it runs
+    (the native one is compiled first where it has not been yet: about 10 s, once per machine)."""
+    logger = node.get_logger()
+    if native_build_pending():
+        logger.info("compiling the native collision narrow phase (once per machine, about 10 s)")
+    checker = CollisionChecker(node.model, collision_model, params.mesh_search_path)
+    problem = checker.narrow_phase_problem
+    logger.info(f"collision narrow phase: {checker.narrow_phase.name}" + (f" ({problem})" if problem else ""))
+    return checker
 
 
 class SceneInput:
