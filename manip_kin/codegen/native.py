@@ -116,7 +116,9 @@ def _target(recipe: NativeRecipe) -> tuple[str, Path]:
     except OSError as error:
         raise NativeUnavailable(f"{recipe.source}: {error.strerror}") from None
     digest = hashlib.sha256()
-    for part in (text, version.encode(), repr(_command(recipe, "", Path(""))).encode(), recipe.version.encode()):
+    # Not the source's path: clones of one release share the build.
+    flags = (FLAGS, recipe.include_dirs, recipe.library_dirs, recipe.libraries)
+    for part in (text, version.encode(), repr(flags).encode(), recipe.version.encode()):
         digest.update(part)
         digest.update(b"\0")
     return compiler, cache_dir() / f"{recipe.name}-{digest.hexdigest()[:16]}.so"

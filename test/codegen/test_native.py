@@ -73,3 +73,15 @@ def test_native_off_and_no_compiler_are_said(tmp_path, cache, monkeypatch):
     monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
     with pytest.raises(NativeUnavailable, match="no C\\+\\+ compiler found"):
         library_path(NativeRecipe("answer", source))
+
+
+def test_the_same_source_elsewhere_reuses_the_build(tmp_path, cache, monkeypatch):
+    text = 'extern "C" int answer() { return 42; }\n'
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    (tmp_path / "one" / "answer.cpp").write_text(text)
+    (tmp_path / "two" / "answer.cpp").write_text(text)  # another clone of the same release
+    runs = _compiles(monkeypatch)
+    first, _ = library_path(NativeRecipe("answer", tmp_path / "one" / "answer.cpp"))
+    second, seconds = library_path(NativeRecipe("answer", tmp_path / "two" / "answer.cpp"))
+    assert second == first and seconds == 0.0 and len(runs) == 1
