@@ -7,6 +7,7 @@ pytest, and every subprocess a test starts, inherits the same isolated domain.
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -37,6 +38,13 @@ os.environ.setdefault("PYTHONUNBUFFERED", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 # The test process is a client (it waits for acknowledgements); the nodes it starts are not.
 use_prompt_acknowledgements()
+
+# A run started in the background of a non-interactive shell (`make test &`, a CI script) has
+# SIGINT ignored (POSIX), and so would every process a test starts: Ctrl-C of a CLI would do
+# nothing (test_stop_signals' goal --wait ran on to convergence). Tests start processes as a
+# terminal would, with SIGINT at Python's default.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Hypothesis: derandomized (examples are a fixed function of the test), so a failure reproduces
 # on any machine; print_blob lets one replay a failing example with @reproduce_failure.
