@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import ctypes
 import fcntl
+import functools
 import hashlib
 import os
 import shutil
@@ -69,6 +70,13 @@ def disabled() -> bool:
     return os.environ.get("MANIP_KIN_NATIVE", "").strip().lower() in ("0", "off", "false", "no")
 
 
+def require_enabled() -> None:
+    """Raise :class:`NativeUnavailable` when :func:`disabled` (looked at on every call, so that a
+    library loaded before the switch was set is not used after it)."""
+    if disabled():
+        raise NativeUnavailable("MANIP_KIN_NATIVE turns native backends off")
+
+
 def cache_dir() -> Path:
     """Where built libraries are kept (see the module docstring)."""
     root = os.environ.get("MANIP_KIN_CACHE") or os.path.join(
@@ -79,9 +87,16 @@ def cache_dir() -> Path:
 
 def _compiler() -> tuple[str, str]:
     """The C++ compiler (``$CXX``, else ``c++``/``g++``/``clang++``) and its version line."""
-    candidates = [os.environ["CXX"]] if os.environ.get("CXX") else ["c++", "g++", "clang++"]
+    return _compiler_on(os.environ.get("CXX", ""), os.environ.get("PATH", ""))
+
+
+@functools.lru_cache(maxsize=8)
+def _compiler_on(cxx: str, search_path: str) -> tuple[str, str]:
+    """:func:`_compiler` for one ``$CXX`` and ``$PATH``: asked once per process (a node's start
+    asks whether a build is pending, then builds or loads)."""
+    candidates = [cxx] if cxx else ["c++", "g++", "clang++"]
     for candidate in candidates:
-        path = shutil.which(candidate)
+        path = shutil.which(candidate, path=search_path or None)
         if path is None:
             continue
         try:
@@ -108,8 +123,7 @@ def _command(recipe: NativeRecipe, compiler: str, output: Path) -> list[str]:
 
 def _target(recipe: NativeRecipe) -> tuple[str, Path]:
     """The compiler and the cache path of ``recipe``'s library (see the module docstring)."""
-    if disabled():
-        raise NativeUnavailable("MANIP_KIN_NATIVE turns native backends off")
+    require_enabled()
     compiler, version = _compiler()
     try:
         text = recipe.source.read_bytes()

@@ -138,7 +138,8 @@ class CollisionChecker:
         self._robot_frames = [g.frame for g in geometries]
         #: The narrow phase (native or Python, see :mod:`manip_kin.collision.narrow_phase`) and
         #: why it is not the native one ("" when it is).
-        self.narrow_phase, self.narrow_phase_problem = make_narrow_phase([g.shape for g in geometries], native)
+        self._robot_shapes = [g.shape for g in geometries]
+        self.narrow_phase, self.narrow_phase_problem = make_narrow_phase(self._robot_shapes, native)
         self._scene_version: int | None = None
         #: Why obstacles of the last scene taken were left out (empty: all were taken).
         self.scene_problems: tuple[str, ...] = ()
@@ -209,7 +210,7 @@ class CollisionChecker:
             self.narrow_phase.set_scene(shapes, poses, pairs)
         except ValueError as error:  # the native one could not take a shape coal's Python bindings could
             self.narrow_phase_problem = str(error)
-            self.narrow_phase = PythonNarrowPhase([g.shape for g in cm.geometries])
+            self.narrow_phase = PythonNarrowPhase(self._robot_shapes)
             self.narrow_phase.set_scene(shapes, poses, pairs)
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)

@@ -11,6 +11,7 @@
 #include <coal/mesh_loader/loader.h>
 #include <coal/shape/geometric_shapes.h>
 
+#include <algorithm>
 #include <exception>
 #include <map>
 #include <memory>

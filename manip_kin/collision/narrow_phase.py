@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_kin.codegen.native import NativeRecipe, NativeUnavailable, build_pending, disabled, load_library
+from manip_kin.codegen.native import NativeRecipe, NativeUnavailable, build_pending, load_library, require_enabled
 from manip_kin.collision.geometry import CollisionShape
 from manip_kin.core.scene import ShapeKind
 
@@ -179,9 +179,13 @@ def _library() -> ctypes.CDLL:
 
 
 def _native_library() -> ctypes.CDLL:
-    if disabled():  # looked at each time: the library may have been loaded before it was set
-        raise NativeUnavailable("MANIP_KIN_NATIVE turns native backends off")
+    require_enabled()
     return _library()
+
+
+def _last_error(library: ctypes.CDLL) -> str:
+    """What ``narrow_phase.cpp`` said of its last failure."""
+    return library.mk_narrow_error().decode(errors="replace")
 
 
 def native_problem() -> str:
@@ -227,7 +231,7 @@ class NativeNarrowPhase:
         kinds, sizes, paths = _shape_arrays(robot_shapes)
         handle = library.mk_narrow_create(len(robot_shapes), kinds.ctypes.data, sizes.ctypes.data, paths)
         if not handle:
-            raise NativeUnavailable(f"narrow phase: {library.mk_narrow_error().decode(errors='replace')}")
+            raise NativeUnavailable(f"narrow phase: {_last_error(library)}")
         self._library, self._handle = library, handle
         self._compute = library.mk_narrow_compute
         self.set_scene([], np.zeros((0, 4, 4)), np.zeros((0, 2), dtype=int))
@@ -246,7 +250,7 @@ class NativeNarrowPhase:
             len(pair_array), pair_array.ctypes.data,
         )  # fmt: skip
         if status != 0:
-            raise ValueError(f"narrow phase: {self._library.mk_narrow_error().decode(errors='replace')}")
+            raise ValueError(f"narrow phase: {_last_error(self._library)}")
         # Buffers with fixed addresses: one call per cycle passes them without converting anything.
         self._rows = np.zeros(max(len(pair_array), 1), dtype=np.intc)
         self._out = np.zeros((max(len(pair_array), 1), ROW_WIDTH))
@@ -264,7 +268,7 @@ class NativeNarrowPhase:
         self._rows[:count] = rows
         placed = np.ascontiguousarray(placed, dtype=float)
         if self._compute(self._handle, placed.ctypes.data, self._rows_address, count, self._out_address) != 0:
-            raise RuntimeError(f"narrow phase: {self._library.mk_narrow_error().decode(errors='replace')}")
+            raise RuntimeError(f"narrow phase: {_last_error(self._library)}")
         return self._out[:count]
 
 
