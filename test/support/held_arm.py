@@ -26,16 +26,17 @@ _arms = itertools.count()
 SLACK = 1e-6  # relative, on the limits: the stream's values are what ruckig computed, rounded
 
 
-def start_held_arm(harness, robot: str, q0, **params):
+def start_held_arm(harness, robot: str, q0, arm_command_timeout: float = math.inf, **params):
     """The fake arm and the controller in a namespace of their own: no other test's node can
-    add to the command stream the arm records."""
+    add to the command stream the arm records. ``arm_command_timeout`` [s]: how long the arm
+    moves on a command (default: forever, as JointGroupVelocityController)."""
     model = load_robot(robot)
     namespace = f"/safety_{os.getpid()}_{next(_arms)}"
     hardware = FakeHardware(
         model_to_urdf(model),
         q0,
         rate_hz=2 * RATE,
-        command_timeout=math.inf,
+        command_timeout=arm_command_timeout,
         command_topic="joint_velocity_commands",
         namespace=namespace,
     )

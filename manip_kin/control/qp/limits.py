@@ -161,5 +161,16 @@ class CollisionLimit:
             )
         _positive("collision gain", self.gain, "m/s")
 
+    @property
+    def hold_time(self) -> float:
+        """``(d_i − d_s) / ξ`` [s]: the longest a command may be held (a stalled loop, a plant
+        that moves on the last command until its timeout) without a pair coming within ``d_s``.
+
+        The damper allows a closing speed of at most ``(d − d_s) / hold_time`` at distance
+        ``d``, so held for ``T`` it closes ``(d − d_s) · T / hold_time``: less than the margin
+        while ``T < hold_time`` (to first order in the motion).
+        """
+        return (self.influence_distance - self.safety_distance) / self.gain
+
     def rows(self, q: np.ndarray) -> DamperRows:
         return self.checker.evaluate(q, self.influence_distance, self.safety_distance, self.gain)

@@ -156,6 +156,12 @@ class CollisionInputs:
             collision_gain=params.collision_gain,
         )
         qp = QpController(model, config, self.checker)
+        if qp.collision_limit is not None:
+            self.node.get_logger().info(
+                f"collision damper: a command held up to {qp.collision_limit.hold_time:.3g} s (a stalled loop, the arm "
+                "moving on the last command until its timeout) cannot take a pair within collision_safety_distance; "
+                "keep the arm's command timeout below it"
+            )
         if self.law is not None:
             qp.fallback_count = self.law.qp.fallback_count  # counted over the node's life
         return CollisionLaw(qp, plain, dt)

@@ -5,6 +5,7 @@ closed forms for the ball arm's spheres against a box (test/support/collision_ro
 objects for the Panda's hand and link 1; over every position the fake arm integrated.
 """
 
+import ctypes
 import math
 import os
 import re
@@ -43,6 +44,10 @@ from manip_kin.ros.wire.messages import make_pose_stamped, make_twist_stamped
 SAFETY = 0.02
 START_Q, GOAL_Q = np.array([-0.6, 0.4, 0.8]), np.array([0.6, 0.4, 0.8])
 BOX_EXTENTS = (0.08, 0.08, 0.08)
+# The arm stops moving on a command after this [s], below the damper's hold time (0.16 s at the
+# default distances and gain): a loop stalled longer cannot then take a pair within the safety
+# distance (test_a_stall_within_the_arms_command_timeout_keeps_the_safety_distance).
+ARM_COMMAND_TIMEOUT = 0.1
 
 
 @pytest.fixture
@@ -97,6 +102,7 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         harness,
         ball_urdf,
         START_Q,
+        arm_command_timeout=ARM_COMMAND_TIMEOUT,
         collision_avoidance=True,
         collision_safety_distance=SAFETY,
         collision_pair_samples=100,
@@ -141,7 +147,13 @@ def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball
     start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
     centre = 0.5 * (start[:3, 3] + goal[:3, 3])
     model, hardware, node, _ = start_held_arm(
-        harness, ball_urdf, START_Q, collision_avoidance=True, collision_pair_samples=100, task="position"
+        harness,
+        ball_urdf,
+        START_Q,
+        arm_command_timeout=ARM_COMMAND_TIMEOUT,
+        collision_avoidance=True,
+        collision_pair_samples=100,
+        task="position",
     )
     try:
         topic = f"{node.test_namespace}/collision_objects"
@@ -161,6 +173,59 @@ def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball
         distances = [_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history)]
         assert min(distances) >= SAFETY - 1e-3, min(distances)
         assert distances[-1] < SAFETY + 0.01  # it went up to the box
+    finally:
+        hardware.close()
+
+
+def _stall_the_process(seconds: float) -> None:
+    """Every thread of this process stopped for ``seconds``: libc's usleep called with the GIL
+    held (ctypes.PyDLL keeps it), as a publish that stalls inside rcl does
+    (docs/performance_limits.md). The controller's loop and the fake arm's thread both stop;
+    the arm then integrates the command it held over the whole interval, up to its timeout."""
+    ctypes.PyDLL(None).usleep(int(seconds * 1e6))
+
+
+def test_a_stall_within_the_arms_command_timeout_keeps_the_safety_distance(harness, ball_urdf):
+    # The damper lets a pair close at (d - d_s) / hold_time at most, so an arm that stops moving
+    # on a command after a timeout below hold_time cannot be taken within d_s by a stall of any
+    # length. Stalled 0.4 s where the damper binds (d ~ 0.03 m): a held-forever arm closes
+    # 25 mm there (through d_s), one with a 0.2 s timeout 12.5 mm (past d_s - 1 mm).
+    model = load_robot(ball_urdf)
+    start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
+    centre = 0.5 * (start[:3, 3] + goal[:3, 3])
+    model, hardware, node, _ = start_held_arm(
+        harness,
+        ball_urdf,
+        START_Q,
+        arm_command_timeout=ARM_COMMAND_TIMEOUT,
+        collision_avoidance=True,
+        collision_pair_samples=100,
+        task="position",
+    )
+    try:
+        hold_time = node.law.qp.collision_limit.hold_time
+        assert hold_time == pytest.approx((0.10 - SAFETY) / 0.5) and ARM_COMMAND_TIMEOUT < hold_time
+        topic = f"{node.test_namespace}/collision_objects"
+        harness.wait_matched(topic, MarkerArray)
+        harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
+        assert harness.spin_until(lambda: len(node.collision.scene) == 1, 3)
+        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])  # 0.1 m/s
+        twist_topic = f"{node.test_namespace}/twist_command"
+        harness.wait_matched(twist_topic, TwistStamped)
+        stalled_at = None
+        deadline = time.monotonic() + 4.0
+        while time.monotonic() < deadline:
+            stamp = harness.node.get_clock().now().to_msg()
+            harness.publish(twist_topic, make_twist_stamped((0, 0, 0), towards, "base_link", stamp))
+            harness.spin_for(0.004)
+            distance = _ball_box_distance(model, hardware.positions(), centre, BOX_EXTENTS)
+            if stalled_at is None and distance < 0.03:
+                stalled_at = distance
+                _stall_the_process(0.4)
+        assert stalled_at is not None and stalled_at > 0.028, stalled_at  # where the damper binds
+        distances = [_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history)]
+        assert min(distances) >= SAFETY - 1e-3, (min(distances), stalled_at)
+        assert distances[-1] < SAFETY + 0.01  # it went on up to the box
     finally:
         hardware.close()
 
