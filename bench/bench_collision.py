@@ -9,8 +9,9 @@ Panda's ready pose towards goals that pass near a sphere, beside a post and abov
 so the pairs within the influence distance, the damper rows and the QP solves are those of a
 running controller. Each cycle is timed on its own (p99 needs single cycles, not block means);
 the plain step is timed in the same loop, interleaved, so the two share the machine's state.
-So is the collision-aware step with the Python narrow phase (``native=False``), on the same
-states: its rates must equal the native one's (``largest_qdot_difference``).
+So is the collision-aware step with the checker's Python path (``native=False``: its broad phase,
+coal's Python bindings, numpy damper rows), on the same states: its rates must equal the native
+one's to rounding (``largest_qdot_difference``).
 Besides wall time, each cycle's thread CPU time is reported (``cpu_*``): on this shared
 machine preemption puts milliseconds into the wall-clock tail that are not the step's.
 
@@ -81,7 +82,7 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
     checker = CollisionChecker(model, collision)
     checker.update_scene(scene)
     aware = QpController(model, checker=checker)
-    # The same law with the Python narrow phase, stepped on the same states: what the native one saves.
+    # The same law on the checker's Python path, stepped on the same states: what the native one saves.
     python_checker = CollisionChecker(model, collision, native=False)
     python_checker.update_scene(scene)
     aware_python = QpController(model, checker=python_checker)
@@ -135,7 +136,7 @@ def benchmark_collision_step(steps_per_goal: int = STEPS_PER_GOAL) -> list[dict]
             "reference": "MoveIt Servo checks collisions at 10 Hz",
         },
         {
-            "metric": "collision-aware QP step panda, Python narrow phase (same states, interleaved)",
+            "metric": "collision-aware QP step panda, Python collision path (same states, interleaved)",
             **python_row,
             "target": "",
             "reference": f"the row above with the {checker.narrow_phase.name} narrow phase",

@@ -15,7 +15,8 @@ shapes rebuilt only when ``scene.version`` moves). Each cycle
 3. the narrow phase (:mod:`~manip_kin.collision.narrow_phase`: coal, from C++ where that can be
    built, else through its Python bindings) computes the distance ``d`` and witness points
    ``p_a``, ``p_b`` of the others (convex shapes: about 1 µs a pair from C++; negative ``d`` is
-   the penetration depth);
+   the penetration depth). The native one runs steps 2 to 4 in one call (``mk_narrow_near``);
+   the Python code here is their reference;
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
 
        n·(J_a(p_a) - J_b(p_b)) q̇  <=  ξ (d - d_s) / (d_i - d_s)
@@ -38,7 +39,7 @@ import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
 from manip_kin.collision.geometry import CollisionShape, frames_and_twists, joint_reach, obstacle_shape, sphere_centres
-from manip_kin.collision.narrow_phase import ROW_WIDTH, PythonNarrowPhase, make_narrow_phase
+from manip_kin.collision.narrow_phase import ROW_WIDTH, NativeNarrowPhase, PythonNarrowPhase, make_narrow_phase
 from manip_kin.core.model import RobotModel
 from manip_kin.core.scene import Scene
 from manip_kin.errors import ModelFileError
@@ -212,6 +213,13 @@ class CollisionChecker:
             self.narrow_phase_problem = str(error)
             self.narrow_phase = PythonNarrowPhase(self._robot_shapes)
             self.narrow_phase.set_scene(shapes, poses, pairs)
+        # The native narrow phase runs this broad phase and the damper rows itself, in the same call.
+        self._native_broad = isinstance(self.narrow_phase, NativeNarrowPhase)
+        if self._native_broad:
+            self.narrow_phase.set_broad_phase(
+                BAND, self._radius_sums, self._reach_pairs, self._moves_first, self._moves_second,
+                self._obstacle_centres.reshape(-1, 3),
+            )  # fmt: skip
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
         # The configuration of the last call, and per joint the sum of |Δq| since the last
@@ -246,23 +254,32 @@ class CollisionChecker:
         frames, self._twists = frames_and_twists(self.model, q)
         return np.matmul(frames[self.collision_model.frames, :3], self._offsets_and_centres)
 
-    def _near_pairs(self, q: np.ndarray, cutoff: float) -> tuple[list[int], np.ndarray]:
-        """The pair rows nearer than ``cutoff`` and their narrow-phase columns (distance, witness
+    def _near_pairs(
+        self, q: np.ndarray, cutoff: float, dampers: bool = False
+    ) -> tuple[list[int], np.ndarray, np.ndarray | None]:
+        """The pair rows nearer than ``cutoff``, their narrow-phase columns (distance, witness
         points, normal, damper features: :mod:`~manip_kin.collision.narrow_phase`), shape
-        (k, 22); updates the lower bounds (see :meth:`pair_distances`).
+        (k, 22), and with ``dampers`` their damper rows (:meth:`_damper_matrix`), else None;
+        updates the lower bounds (see :meth:`pair_distances`). The native narrow phase does all
+        of it in C++ (``mk_narrow_near``); this is the reference it is held to.
 
         Since the last call each shape moved by at most ``Σ_j |Δq_j| · reach[j]``
         (:func:`~manip_kin.collision.geometry.joint_reach`, whatever the path between the two
         configurations), so a pair's distance fell by at most its two shapes' bounds: the lower
         bound carried from the last call less those stays one.
         """
+        placed = self._place(q)
+        if self._native_broad:
+            rows, columns, matrix, self.pairs_computed = self.narrow_phase.near_pairs(
+                q, placed, cutoff, self._twists if dampers else None
+            )
+            return rows, columns, matrix
         q_values = q.tolist()
         if self._previous is not None:
             step = [abs(a - b) for a, b in zip(q_values, self._previous)]
             self._travel = [t + d for t, d in zip(self._travel, step)]
             self._budget -= sum(d * r for d, r in zip(step, self._reach_most))
         self._previous = q_values
-        placed = self._place(q)
         lower = self._lower
         if cutoff == self._near_cutoff and self._budget > 0.0:
             # Every pair left out at the last full pass was BAND beyond the cutoff, and none can
@@ -280,7 +297,7 @@ class CollisionChecker:
             self._near_cutoff, self._budget = cutoff, BAND
         self.pairs_computed = len(rows)
         if not rows:
-            return [], _NO_COLUMNS
+            return [], _NO_COLUMNS, None
         columns = self.narrow_phase.compute(placed, rows, cutoff)
         distances = columns[:, 0]
         lower[rows] = distances
@@ -290,9 +307,9 @@ class CollisionChecker:
         near = (distances < cutoff + self._budget).tolist()
         self._near_rows = [row for row, keep in zip(rows, near) if keep]
         found = (distances < cutoff).tolist()
-        if all(found):
-            return rows, columns
-        return [row for row, keep in zip(rows, found) if keep], columns[found]
+        if not all(found):
+            rows, columns = [row for row, keep in zip(rows, found) if keep], columns[found]
+        return rows, columns, self._damper_matrix(rows, columns) if dampers and rows else None
 
     def _pair(self, row: int, columns: np.ndarray) -> PairDistance:
         """The :class:`PairDistance` of pair ``row`` from its narrow-phase columns."""
@@ -315,7 +332,7 @@ class CollisionChecker:
         Between nearby configurations (a control loop, a sampled path) most far pairs are
         therefore computed once and skipped afterwards.
         """
-        rows, columns = self._near_pairs(q, cutoff)
+        rows, columns, _ = self._near_pairs(q, cutoff)
         return [self._pair(row, line) for row, line in zip(rows, columns)]
 
     def link_distances(self, q: np.ndarray) -> list[PairDistance]:
@@ -337,7 +354,7 @@ class CollisionChecker:
             safety_distance: ``d_s`` [m], >= 0.
             gain: ``ξ`` [m/s], > 0: the closing speed allowed at ``d_i``.
         """
-        rows, columns = self._near_pairs(q, influence_distance)
+        rows, columns, matrix = self._near_pairs(q, influence_distance, dampers=True)
         if not rows:
             return DamperRows((), np.zeros(0), np.zeros((0, self.model.dof)), np.zeros(0), None)
         distances = columns[:, 0].copy()
@@ -347,7 +364,7 @@ class CollisionChecker:
         return DamperRows(
             tuple(labels[row] for row in rows),
             distances,
-            self._damper_matrix(rows, columns),
+            matrix,
             bound,
             self._pair(rows[nearest], columns[nearest]),
         )

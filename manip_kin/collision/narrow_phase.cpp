@@ -1,7 +1,9 @@
 // The collision narrow phase in C++: coal's distance and witness points of the pairs a control
 // cycle asks for, and each pair's damper features, in one call (manip_kin/collision/narrow_phase.py
 // builds this with the system's C++ compiler and calls it through ctypes; its Python loop is the
-// fallback and the reference the tests hold this to).
+// fallback and the reference the tests hold this to). mk_narrow_near runs the broad phase of
+// manip_kin/collision/distances.py (CollisionChecker._near_pairs, the reference) before it and
+// the damper rows after it, on arrays that Python derives once per scene.
 //
 // Shapes are built as manip_kin/collision/geometry.py builds them: box (full extents), sphere,
 // cylinder (radius, length along z), and a mesh file as its convex hull (coal's MeshLoader,
@@ -12,6 +14,7 @@
 #include <coal/shape/geometric_shapes.h>
 
 #include <algorithm>
+#include <cmath>
 #include <exception>
 #include <map>
 #include <memory>
@@ -27,6 +30,27 @@ constexpr int kRowWidth = 22;
 
 std::string last_error;
 
+// The broad phase's arrays (set per scene) and state (carried between calls), as
+// CollisionChecker._near_pairs keeps them: P pairs, dof joints.
+struct BroadPhase {
+  bool set = false;
+  int dof = 0;
+  double band = 0.0;
+  std::vector<double> radius_sums;                // P
+  std::vector<double> reach_pairs;                // dof x P
+  std::vector<double> reach_most;                 // dof: the largest reach of each joint
+  std::vector<double> moves_first, moves_second;  // P x dof: 1 where the joint moves the shape
+  std::vector<double> centres;                    // shapes x 3: bounding-sphere centres
+  std::vector<double> lower;                      // P: a lower bound on each pair's distance
+  std::vector<double> previous, travel;           // dof; previous empty before the first call
+  double budget = 0.0;
+  std::vector<int> near_rows;
+  bool has_cutoff = false;
+  double near_cutoff = 0.0;
+  std::vector<int> rows;       // scratch: the rows asked this call
+  std::vector<double> lines;   // scratch: their columns
+};
+
 struct NarrowPhase {
   std::vector<coal::CollisionGeometryPtr_t> shapes;  // robot shapes, then obstacles
   std::vector<coal::Transform3s> transforms;         // obstacles' stay as set; robot's set per call
@@ -37,6 +61,7 @@ struct NarrowPhase {
   coal::DistanceResult result;
   std::vector<char> placed;  // per robot shape: placed in this call yet
   std::map<std::string, coal::CollisionGeometryPtr_t> meshes;  // obstacle meshes by file and scale
+  BroadPhase broad;
 };
 
 coal::CollisionGeometryPtr_t make_shape(int kind, const double* size, const char* path) {
@@ -66,6 +91,76 @@ void write_features(const coal::Vec3s& p, const coal::Vec3s& n, double* out) {
   out[3] = n[0];
   out[4] = n[1];
   out[5] = n[2];
+}
+
+void compute_rows(NarrowPhase* phase, const double* placed, const int* rows, int row_count, double* out) {
+  std::fill(phase->placed.begin(), phase->placed.end(), 0);
+  for (int r = 0; r < row_count; ++r) {
+    const int row = rows[r];
+    if (row < 0 || row >= static_cast<int>(phase->functors.size())) throw std::runtime_error("row out of range");
+    for (int shape : {phase->first[row], phase->second[row]}) {
+      if (shape >= phase->robot_count || phase->placed[shape]) continue;
+      const double* m = placed + 15 * shape;
+      coal::Matrix3s rotation;
+      rotation << m[0], m[1], m[2], m[5], m[6], m[7], m[10], m[11], m[12];
+      phase->transforms[shape].setTransform(rotation, coal::Vec3s(m[3], m[8], m[13]));
+      phase->placed[shape] = 1;
+    }
+    coal::DistanceResult& result = phase->result;
+    result.clear();
+    const double distance = (*phase->functors[row])(phase->transforms[phase->first[row]],
+                                                     phase->transforms[phase->second[row]], phase->request, result);
+    double* line = out + kRowWidth * r;
+    line[0] = distance;
+    const coal::Vec3s &p1 = result.nearest_points[0], &p2 = result.nearest_points[1], &n = result.normal;
+    for (int i = 0; i < 3; ++i) {
+      line[1 + i] = p1[i];
+      line[4 + i] = p2[i];
+      line[7 + i] = n[i];
+    }
+    write_features(p1, n, line + 10);
+    write_features(p2, n, line + 16);
+  }
+}
+
+// Into broad.rows: the pairs CollisionChecker._near_pairs would ask the narrow phase for at q
+// (the same bounds, the same order of operations).
+void select_rows(NarrowPhase* phase, const double* q, const double* placed, double cutoff) {
+  BroadPhase& broad = phase->broad;
+  const int dof = broad.dof, pairs = static_cast<int>(broad.radius_sums.size());
+  if (!broad.previous.empty()) {
+    for (int j = 0; j < dof; ++j) {
+      const double step = std::abs(q[j] - broad.previous[j]);
+      broad.travel[j] += step;
+      broad.budget -= step * broad.reach_most[j];
+    }
+  }
+  broad.previous.assign(q, q + dof);
+  if (broad.has_cutoff && cutoff == broad.near_cutoff && broad.budget > 0.0) {
+    broad.rows = broad.near_rows;
+    return;
+  }
+  for (int k = 0; k < pairs; ++k) {
+    double fall = 0.0;
+    for (int j = 0; j < dof; ++j) fall += broad.travel[j] * broad.reach_pairs[j * pairs + k];
+    broad.lower[k] -= fall;
+  }
+  std::fill(broad.travel.begin(), broad.travel.end(), 0.0);
+  for (int g = 0; g < phase->robot_count; ++g)
+    for (int i = 0; i < 3; ++i) broad.centres[3 * g + i] = placed[15 * g + 5 * i + 4];
+  broad.rows.clear();
+  for (int k = 0; k < pairs; ++k) {
+    const double* a = broad.centres.data() + 3 * phase->first[k];
+    const double* b = broad.centres.data() + 3 * phase->second[k];
+    const double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    const double gap = std::sqrt(dx * dx + dy * dy + dz * dz) - broad.radius_sums[k];
+    broad.lower[k] = std::max(broad.lower[k], gap);
+    if (broad.lower[k] < cutoff + broad.band) broad.rows.push_back(k);
+  }
+  broad.near_rows = broad.rows;
+  broad.has_cutoff = true;
+  broad.near_cutoff = cutoff;
+  broad.budget = broad.band;
 }
 
 }  // namespace
@@ -138,6 +233,7 @@ int mk_narrow_set_scene(void* handle, int obstacle_count, const int* kinds, cons
     phase->first.swap(first);
     phase->second.swap(second);
     phase->functors.swap(functors);
+    phase->broad.set = false;  // its arrays are per pair: mk_narrow_set_broad again
     return 0;
   } catch (const std::exception& error) {
     last_error = error.what();
@@ -150,35 +246,87 @@ void mk_narrow_destroy(void* handle) { delete static_cast<NarrowPhase*>(handle);
 // placed: the robot shapes' [R | t | c] in base, row-major (robot_count, 3, 5); rows: row_count pair
 // indices; out: row_count x kRowWidth. Returns 0, or -1 (see mk_narrow_error).
 int mk_narrow_compute(void* handle, const double* placed, const int* rows, int row_count, double* out) {
+  try {
+    compute_rows(static_cast<NarrowPhase*>(handle), placed, rows, row_count, out);
+    return 0;
+  } catch (const std::exception& error) {
+    last_error = error.what();
+    return -1;
+  }
+}
+
+// The broad phase's arrays for the pairs of the last mk_narrow_set_scene (P of them), dof joints:
+// radius_sums (P), reach_pairs (dof x P), moves_first and moves_second (P x dof), the obstacles'
+// bounding-sphere centres (3 each), and band [m]. Resets its state. Returns 0.
+int mk_narrow_set_broad(void* handle, int dof, double band, const double* radius_sums, const double* reach_pairs,
+                        const double* moves_first, const double* moves_second, const double* obstacle_centres) {
+  auto* phase = static_cast<NarrowPhase*>(handle);
+  BroadPhase& broad = phase->broad;
+  const int pairs = static_cast<int>(phase->first.size());
+  const int obstacles = static_cast<int>(phase->shapes.size()) - phase->robot_count;
+  broad = BroadPhase();
+  broad.dof = dof;
+  broad.band = band;
+  broad.radius_sums.assign(radius_sums, radius_sums + pairs);
+  broad.reach_pairs.assign(reach_pairs, reach_pairs + dof * pairs);
+  broad.reach_most.assign(dof, 0.0);
+  for (int j = 0; j < dof; ++j)
+    for (int k = 0; k < pairs; ++k) broad.reach_most[j] = std::max(broad.reach_most[j], reach_pairs[j * pairs + k]);
+  broad.moves_first.assign(moves_first, moves_first + pairs * dof);
+  broad.moves_second.assign(moves_second, moves_second + pairs * dof);
+  broad.centres.assign(3 * (phase->robot_count + obstacles), 0.0);
+  std::copy(obstacle_centres, obstacle_centres + 3 * obstacles, broad.centres.begin() + 3 * phase->robot_count);
+  broad.lower.assign(pairs, -INFINITY);
+  broad.travel.assign(dof, 0.0);
+  broad.lines.assign(static_cast<size_t>(std::max(pairs, 1)) * kRowWidth, 0.0);
+  broad.set = true;
+  return 0;
+}
+
+// One cycle of CollisionChecker._near_pairs: the broad phase at q (dof values) with the robot
+// shapes placed as in mk_narrow_compute, the narrow phase of the pairs it keeps, and of those
+// nearer than cutoff: their rows (out_rows), columns (out_columns, kRowWidth each) and, when
+// twists (the joints' [w; v], row-major 6 x dof) is not null, damper rows (out_matrix, dof each).
+// counts: [pairs nearer than cutoff, pairs computed]. Returns 0, or -1 (see mk_narrow_error).
+int mk_narrow_near(void* handle, const double* q, const double* placed, double cutoff, const double* twists,
+                   int* out_rows, double* out_columns, double* out_matrix, int* counts) {
   auto* phase = static_cast<NarrowPhase*>(handle);
   try {
-    std::fill(phase->placed.begin(), phase->placed.end(), 0);
-    for (int r = 0; r < row_count; ++r) {
-      const int row = rows[r];
-      if (row < 0 || row >= static_cast<int>(phase->functors.size())) throw std::runtime_error("row out of range");
-      for (int shape : {phase->first[row], phase->second[row]}) {
-        if (shape >= phase->robot_count || phase->placed[shape]) continue;
-        const double* m = placed + 15 * shape;
-        coal::Matrix3s rotation;
-        rotation << m[0], m[1], m[2], m[5], m[6], m[7], m[10], m[11], m[12];
-        phase->transforms[shape].setTransform(rotation, coal::Vec3s(m[3], m[8], m[13]));
-        phase->placed[shape] = 1;
+    BroadPhase& broad = phase->broad;
+    if (!broad.set) throw std::runtime_error("no broad phase for this scene (mk_narrow_set_broad)");
+    select_rows(phase, q, placed, cutoff);
+    const int asked = static_cast<int>(broad.rows.size());
+    compute_rows(phase, placed, broad.rows.data(), asked, broad.lines.data());
+    broad.near_rows.clear();
+    int found = 0;
+    const int dof = broad.dof;
+    for (int r = 0; r < asked; ++r) {
+      const int row = broad.rows[r];
+      const double* line = broad.lines.data() + kRowWidth * r;
+      const double distance = line[0];
+      broad.lower[row] = distance;
+      // Found at cutoff + what is left of the band or beyond: it cannot come within cutoff first.
+      if (distance < cutoff + broad.budget) broad.near_rows.push_back(row);
+      if (!(distance < cutoff)) continue;
+      out_rows[found] = row;
+      std::copy(line, line + kRowWidth, out_columns + kRowWidth * found);
+      if (twists != nullptr) {
+        const double* moves_first = broad.moves_first.data() + row * dof;
+        const double* moves_second = broad.moves_second.data() + row * dof;
+        double* matrix_row = out_matrix + dof * found;
+        for (int j = 0; j < dof; ++j) {
+          double first = 0.0, second = 0.0;
+          for (int i = 0; i < 6; ++i) {
+            first += line[10 + i] * twists[i * dof + j];
+            second += line[16 + i] * twists[i * dof + j];
+          }
+          matrix_row[j] = first * moves_first[j] - second * moves_second[j];
+        }
       }
-      coal::DistanceResult& result = phase->result;
-      result.clear();
-      const double distance = (*phase->functors[row])(phase->transforms[phase->first[row]],
-                                                       phase->transforms[phase->second[row]], phase->request, result);
-      double* line = out + kRowWidth * r;
-      line[0] = distance;
-      const coal::Vec3s &p1 = result.nearest_points[0], &p2 = result.nearest_points[1], &n = result.normal;
-      for (int i = 0; i < 3; ++i) {
-        line[1 + i] = p1[i];
-        line[4 + i] = p2[i];
-        line[7 + i] = n[i];
-      }
-      write_features(p1, n, line + 10);
-      write_features(p2, n, line + 16);
+      ++found;
     }
+    counts[0] = found;
+    counts[1] = asked;
     return 0;
   } catch (const std::exception& error) {
     last_error = error.what();

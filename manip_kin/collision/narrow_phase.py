@@ -10,7 +10,8 @@ unit normal ``n`` from ``a`` to ``b``; and the damper features ``[p_a × n, n]``
 * :class:`NativeNarrowPhase`: ``narrow_phase.cpp``, built against coal's C++ library by
   :mod:`manip_kin.codegen.native` and called once per cycle through ctypes. It builds its
   own shapes from the same descriptions as :mod:`manip_kin.collision.geometry` (a mesh as
-  its convex hull, loaded and hulled by the same coal calls).
+  its convex hull, loaded and hulled by the same coal calls). :meth:`NativeNarrowPhase.near_pairs`
+  also runs the checker's broad phase before and its damper rows after, in the same call.
 * :class:`PythonNarrowPhase`: the same through coal's Python bindings, a few calls per pair.
   It is the fallback where the native one cannot be built (no compiler, no Eigen headers,
   ``MANIP_KIN_NATIVE=0``) and the reference the tests hold the native one to.
@@ -173,6 +174,10 @@ def _library() -> ctypes.CDLL:
     library.mk_narrow_destroy.argtypes = [pointer]
     library.mk_narrow_compute.restype = ctypes.c_int
     library.mk_narrow_compute.argtypes = [pointer, pointer, pointer, ctypes.c_int, pointer]
+    library.mk_narrow_set_broad.restype = ctypes.c_int
+    library.mk_narrow_set_broad.argtypes = [pointer, ctypes.c_int, ctypes.c_double, *[pointer] * 5]
+    library.mk_narrow_near.restype = ctypes.c_int
+    library.mk_narrow_near.argtypes = [pointer, pointer, pointer, ctypes.c_double, *[pointer] * 5]
     if library.mk_narrow_row_width() != ROW_WIDTH:
         raise NativeUnavailable(f"narrow_phase.cpp writes {library.mk_narrow_row_width()} columns, not {ROW_WIDTH}")
     return library
@@ -233,7 +238,8 @@ class NativeNarrowPhase:
         if not handle:
             raise NativeUnavailable(f"narrow phase: {_last_error(library)}")
         self._library, self._handle = library, handle
-        self._compute = library.mk_narrow_compute
+        self._robot_count = len(robot_shapes)
+        self._compute, self._near = library.mk_narrow_compute, library.mk_narrow_near
         self.set_scene([], np.zeros((0, 4, 4)), np.zeros((0, 2), dtype=int))
 
     def set_scene(self, obstacle_shapes: Sequence[CollisionShape], obstacle_poses: np.ndarray, pairs) -> None:
@@ -255,6 +261,62 @@ class NativeNarrowPhase:
         self._rows = np.zeros(max(len(pair_array), 1), dtype=np.intc)
         self._out = np.zeros((max(len(pair_array), 1), ROW_WIDTH))
         self._rows_address, self._out_address = self._rows.ctypes.data, self._out.ctypes.data
+
+    def set_broad_phase(
+        self,
+        band: float,
+        radius_sums: np.ndarray,
+        reach_pairs: np.ndarray,
+        moves_first: np.ndarray,
+        moves_second: np.ndarray,
+        obstacle_centres: np.ndarray,
+    ) -> None:
+        """The broad phase's arrays for the pairs of the last :meth:`set_scene` (P pairs, n
+        joints), as :class:`~manip_kin.collision.distances.CollisionChecker` derives them:
+        ``radius_sums`` (P,) [m], ``reach_pairs`` (n, P) [m per rad | m], ``moves_first`` and
+        ``moves_second`` (P, n) of 0 and 1, ``obstacle_centres`` (m, 3) [m]; ``band`` [m]. Resets
+        the bounds :meth:`near_pairs` carries between calls."""
+        pairs, dof = np.shape(moves_first)
+        arrays = [
+            np.ascontiguousarray(a, dtype=float)
+            for a in (radius_sums, reach_pairs, moves_first, moves_second, obstacle_centres)
+        ]
+        self._library.mk_narrow_set_broad(self._handle, dof, band, *[a.ctypes.data for a in arrays])
+        self._found_rows = np.zeros(max(pairs, 1), dtype=np.intc)
+        self._found_columns = np.zeros((max(pairs, 1), ROW_WIDTH))
+        self._matrix = np.zeros((max(pairs, 1), dof))
+        self._counts = np.zeros(2, dtype=np.intc)
+        # The inputs too: copying into a buffer costs less than asking an array for its address.
+        self._q, self._placed, self._twists = np.zeros(dof), np.zeros((self._robot_count, 3, 5)), np.zeros((6, dof))
+        self._addresses = [a.ctypes.data for a in (self._q, self._placed, self._twists)]
+        self._near_addresses = [
+            a.ctypes.data for a in (self._found_rows, self._found_columns, self._matrix, self._counts)
+        ]
+
+    def near_pairs(
+        self, q: np.ndarray, placed: np.ndarray, cutoff: float, twists: np.ndarray | None
+    ) -> tuple[list[int], np.ndarray, np.ndarray | None, int]:
+        """The broad phase of :meth:`~manip_kin.collision.distances.CollisionChecker._near_pairs`
+        (its reference), this narrow phase and, with the joints' ``twists`` (6, n), the damper
+        rows, in one call: the pair rows nearer than ``cutoff`` [m], their columns (a view the
+        next call overwrites), their damper rows (k, n) or None, and how many pairs were computed.
+
+        Args:
+            q: joint positions, shape (n,).
+            placed: the robot shapes' ``[R | t | c]`` in base, shape (G, 3, 5).
+        """
+        self._q[:] = q
+        self._placed[...] = placed
+        q_address, placed_address, twists_address = self._addresses
+        if twists is None:
+            twists_address = None
+        else:
+            self._twists[...] = twists
+        if self._near(self._handle, q_address, placed_address, cutoff, twists_address, *self._near_addresses):
+            raise RuntimeError(f"narrow phase: {_last_error(self._library)}")
+        found, computed = self._counts.tolist()
+        matrix = None if twists is None else self._matrix[:found].copy()
+        return self._found_rows[:found].tolist(), self._found_columns[:found], matrix, computed
 
     def __del__(self):
         handle, self._handle = getattr(self, "_handle", None), None

@@ -89,12 +89,14 @@ def test_distances_match_closed_forms(ball_arm, q, centre, radius):
         assert found[("base_link", "link3")].distance == pytest.approx(gap, abs=1e-6)
 
 
-def test_damper_rows_are_the_distance_gradient(panda):
+@pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+def test_damper_rows_are_the_distance_gradient(panda, native):
     model, collision = panda
     scene = Scene()
     scene.add(make_obstacle(("cell", 1), "box", (0.2, 0.2, 0.2), make_transform(None, [0.55, 0.1, 0.45])))
-    checker = CollisionChecker(model, collision)
+    checker = CollisionChecker(model, collision, native=native)
     checker.update_scene(scene)
+    assert checker.narrow_phase.name == ("native" if native else "python"), checker.narrow_phase_problem
     q = PANDA_READY
     rows = checker.evaluate(q, 0.3, 0.02, 0.5)
     assert len(rows.labels) >= 3
@@ -106,7 +108,7 @@ def test_damper_rows_are_the_distance_gradient(panda):
             dq[j] = step
             values = []
             for sign in (1, -1):
-                fresh = CollisionChecker(model, collision)
+                fresh = CollisionChecker(model, collision, native=False)
                 fresh.update_scene(scene)
                 # A link of several shapes has a row per shape pair: follow this row's one.
                 same = [p.distance for p in fresh.pair_distances(q + sign * dq) if p.label == label]

@@ -5,7 +5,8 @@ gap between bounding spheres, or the distance last computed less a joint-rate bo
 far the shapes moved since. Along random walks of the Panda among random obstacles, every
 pair's true distance is computed here with coal directly (numpy forward kinematics, fresh
 coal objects, no broad phase) and each pair nearer than the cutoff must be in the checker's
-answer, at the same distance.
+answer, at the same distance. Both broad phases: the checker's Python one, and the native
+narrow phase's C++ one (``mk_narrow_near``).
 """
 
 import coal
@@ -22,6 +23,14 @@ from manip_kin.core.rotations import make_transform
 from manip_kin.core.scene import Scene, make_obstacle
 
 CUTOFF = 0.1
+BOTH = pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+
+
+def _checker(model, collision, scene, native: bool) -> CollisionChecker:
+    checker = CollisionChecker(model, collision, native=native)
+    checker.update_scene(scene)
+    assert checker.narrow_phase.name == ("native" if native else "python"), checker.narrow_phase_problem
+    return checker
 
 
 def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
@@ -48,7 +57,8 @@ def _true_distances(model, collision, obstacles, q) -> list[tuple[str, float]]:
     scale=st.sampled_from([1.0, 0.01, 0.001]),
 )
 @settings(max_examples=40, deadline=None)
-def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, centres, radius, scale):
+@BOTH
+def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, native, start, steps, centres, radius, scale):
     model, collision = panda
     scene = Scene()
     obstacles = []
@@ -58,8 +68,7 @@ def test_no_pair_within_the_cutoff_is_skipped_along_a_walk(panda, start, steps, 
         scene.add(make_obstacle(("cell", k), kind, size, pose))
         shape = coal.Sphere(radius) if kind == "sphere" else coal.Box(*size)
         obstacles.append((f"obstacle:cell/{k}", shape, pose, 0))
-    checker = CollisionChecker(model, collision)
-    checker.update_scene(scene)
+    checker = _checker(model, collision, scene, native)
     # Anywhere in the joint ranges: folded arms bring link pairs near each other too.
     q = model.lower + np.array(start) * (model.upper - model.lower)
     # A walk: one joint at a time, in one to eight equal steps (small steps as in a control
@@ -100,13 +109,13 @@ def test_joint_reach_bounds_how_far_any_point_of_a_shape_moves(panda, q0, q1, di
 
 @given(start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7))
 @settings(max_examples=10, deadline=None)
-def test_a_still_arm_computes_only_the_pairs_within_the_band(panda, start):
+@BOTH
+def test_a_still_arm_computes_only_the_pairs_within_the_band(panda, native, start):
     model, collision = panda
     scene = Scene()
     scene.add(make_obstacle(("cell", 0), "sphere", (0.2,) * 3, make_transform(None, [0.4, 0.0, 0.5])))
     obstacles = [("obstacle:cell/0", coal.Sphere(0.1), make_transform(None, [0.4, 0.0, 0.5]), 0)]
-    checker = CollisionChecker(model, collision)
-    checker.update_scene(scene)
+    checker = _checker(model, collision, scene, native)
     q = model.lower + np.array(start) * (model.upper - model.lower)
     truth = _true_distances(model, collision, obstacles, q)
     checker.pair_distances(q, CUTOFF)
@@ -118,7 +127,8 @@ def test_a_still_arm_computes_only_the_pairs_within_the_band(panda, start):
         assert checker.pairs_computed == sum(d < CUTOFF + BAND for _, d in truth) <= first
 
 
-def test_a_pair_found_just_beyond_the_cutoff_is_followed_as_it_comes_near(panda):
+@BOTH
+def test_a_pair_found_just_beyond_the_cutoff_is_followed_as_it_comes_near(panda, native):
     """The hand turns with joint 1 towards a ball first found 1 mm beyond the cutoff, in steps
     of 0.1 mrad (well within one band): it must be reported from the step it comes within."""
     from collision_robots import PANDA_READY
@@ -139,8 +149,7 @@ def test_a_pair_found_just_beyond_the_cutoff_is_followed_as_it_comes_near(panda)
     centre = hand + high * ahead
     scene = Scene()
     scene.add(make_obstacle(("cell", 0), "sphere", (0.1,) * 3, make_transform(None, centre)))
-    checker = CollisionChecker(model, collision)
-    checker.update_scene(scene)
+    checker = _checker(model, collision, scene, native)
     q = PANDA_READY.copy()
     crossed = None
     for step in range(200):

@@ -103,6 +103,53 @@ def test_native_and_python_narrow_phases_agree_with_coal(panda, fractions, obsta
             np.testing.assert_allclose(line[16:22], np.concatenate([np.cross(point_b, normal), normal]), atol=1e-9)
 
 
+@given(
+    start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7),
+    steps=st.lists(st.tuples(st.integers(0, 6), st.floats(-0.05, 0.05)), min_size=5, max_size=40),
+    obstacles=st.lists(
+        st.tuples(
+            st.sampled_from(KINDS),
+            st.floats(0.03, 0.3),
+            st.tuples(st.floats(-0.3, 0.8), st.floats(-0.6, 0.6), st.floats(-0.1, 1.0)),
+            st.floats(-3.0, 3.0),
+        ),
+        min_size=1,
+        max_size=3,
+    ),
+    influence=st.sampled_from([0.05, 0.1, 0.3]),
+    # Small steps stay within one band (the near rows only), large ones make full passes.
+    scale=st.sampled_from([1.0, 0.02, 0.001]),
+)
+@settings(max_examples=25, deadline=None)
+def test_the_native_broad_phase_and_damper_rows_are_the_python_checkers_along_a_walk(
+    panda, start, steps, obstacles, influence, scale
+):
+    """mk_narrow_near (broad phase, narrow phase, damper rows in C++) against the checker's
+    Python path, cycle after cycle: the same pairs computed, the same rows, the same numbers."""
+    model, collision = panda
+    scene, _ = _scene(panda, obstacles)
+    native, python = CollisionChecker(model, collision), CollisionChecker(model, collision, native=False)
+    for checker in (native, python):
+        checker.update_scene(scene)
+    assert isinstance(native.narrow_phase, NativeNarrowPhase) and isinstance(python.narrow_phase, PythonNarrowPhase)
+    q = model.lower + np.array(start) * (model.upper - model.lower)
+    for joint, move in steps:
+        q = q.copy()
+        q[joint] = np.clip(q[joint] + scale * move, model.lower[joint], model.upper[joint])
+        ours, reference = native.evaluate(q, influence, 0.02, 0.5), python.evaluate(q, influence, 0.02, 0.5)
+        assert native.pairs_computed == python.pairs_computed
+        assert ours.labels == reference.labels
+        np.testing.assert_allclose(ours.distances, reference.distances, atol=1e-9)
+        np.testing.assert_allclose(ours.matrix, reference.matrix, atol=1e-9)
+        np.testing.assert_allclose(ours.bound, reference.bound, atol=1e-9)
+        if reference.nearest is not None:
+            assert ours.nearest.pair == reference.nearest.pair
+            np.testing.assert_allclose(ours.nearest.point_first, reference.nearest.point_first, atol=1e-9)
+        # pair_distances shares the bounds evaluate carries: mixing the two keeps them equal.
+        assert sorted(p.label for p in native.pair_distances(q, influence)) == sorted(ours.labels)
+        python.pair_distances(q, influence)
+
+
 def test_the_python_narrow_phase_runs_where_native_is_off(panda, monkeypatch):
     monkeypatch.setenv("MANIP_KIN_NATIVE", "0")
     model, collision = panda
