@@ -80,6 +80,25 @@ def test_node_runner_exit_codes(monkeypatch):
     assert run_node(failure, "usage", argv=["node"]) == 1
 
 
+def test_a_stop_signal_that_breaks_a_nodes_start_is_a_clean_stop(capfd):
+    """A SIGINT while the node is made shuts its context down; what that breaks is a stop (0)."""
+    import os
+    import signal
+
+    from manip_kin.ros.runtime.runner import run_node
+
+    def interrupted():
+        os.kill(os.getpid(), signal.SIGINT)  # rclpy's handler shuts the context down
+        raise RuntimeError("failed to create publisher: rcl node's context is invalid")
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        assert run_node(interrupted, "usage", argv=["node"]) == 0
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert "could not start" not in capfd.readouterr().err
+
+
 def test_cli_maps_failures_to_exit_1(monkeypatch, capsys):
     import manip_kin.cli.model_commands as model_commands
     from manip_kin.cli import main

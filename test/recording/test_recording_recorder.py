@@ -238,6 +238,27 @@ def recorder_in_process(monkeypatch, tmp_path):
     rclpy.try_shutdown()
 
 
+def test_a_stop_signal_during_the_first_discovery_still_leaves_a_finished_recording(
+    monkeypatch, recorder_in_process
+):
+    # A SIGINT's context shutdown can land while __init__ runs its first discovery (once in a full
+    # run: "failed to get topic names and types: rcl node's context is invalid", exit 1, no file).
+    from manip_kin.ros.nodes.recorder import RecorderNode
+
+    discover = RecorderNode.get_topic_names_and_types
+
+    def shut_down_first(node):
+        rclpy.try_shutdown()  # what rclpy's signal handler does, here at the worst moment
+        return discover(node)
+
+    monkeypatch.setattr(RecorderNode, "get_topic_names_and_types", shut_down_first)
+    recorder, output = recorder_in_process(manual_intake=True)
+    assert not recorder.context.ok()
+    assert "0 messages" in recorder.finish()
+    assert output.read_bytes().endswith(b"\x89MCAP0\r\n")  # finished: its footer and closing magic
+    assert read_info(output).message_count == 0
+
+
 def _reliable_states(ros):
     return ros.create_publisher(
         JointState, "/joint_states", QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)

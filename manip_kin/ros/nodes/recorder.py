@@ -86,6 +86,18 @@ class RecorderNode(Node):
         self._finished_line: str | None = None
         self._stop_reason = ""
         self._write_error: RecordingWriteError | None = None
+        self._intake: threading.Thread | None = None
+        try:
+            self._start(compression)
+        except Exception:
+            # A stop signal shuts the context down at any moment, this start included ("context
+            # is invalid" from the first discovery or a timer): the node is made all the same,
+            # and finish() completes the file as on any stop.
+            if self.context.ok():
+                raise
+
+    def _start(self, compression: str) -> None:
+        """Subscriptions, discovery, timers and the intake thread."""
         if not self._all_topics:
             for topic in sorted(self._wanted):
                 known_type = manip_kin_type(topic)
@@ -312,7 +324,8 @@ class RecorderNode(Node):
         if self._finished_line is not None:
             return self._finished_line
         self._stopping.set()
-        self._intake.join(timeout=5.0)
+        if self._intake is not None:
+            self._intake.join(timeout=5.0)
         self._drain(final=True)  # messages that arrived before the signal are part of the run
         self._take_lost_events()
         for entry in self._topics.values():

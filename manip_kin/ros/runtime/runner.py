@@ -297,6 +297,8 @@ def run_node(
         except (KeyboardInterrupt, ExternalShutdownException):  # stopped while waiting (robot_description)
             return 0
         except Exception as error:  # noqa: BLE001 - anything else: say why, exit non-zero
+            if stop_signals.received.is_set():  # the signal's context shutdown broke the start: a stop
+                return 0
             print(f"error: the node could not start: {type(error).__name__}: {error}", file=sys.stderr)
             return 1
         try:
