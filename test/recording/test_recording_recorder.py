@@ -238,9 +238,7 @@ def recorder_in_process(monkeypatch, tmp_path):
     rclpy.try_shutdown()
 
 
-def test_a_stop_signal_during_the_first_discovery_still_leaves_a_finished_recording(
-    monkeypatch, recorder_in_process
-):
+def test_a_stop_signal_during_the_first_discovery_still_leaves_a_finished_recording(monkeypatch, recorder_in_process):
     # A SIGINT's context shutdown can land while __init__ runs its first discovery (once in a full
     # run: "failed to get topic names and types: rcl node's context is invalid", exit 1, no file).
     from manip_kin.ros.nodes.recorder import RecorderNode
