@@ -28,6 +28,17 @@ pytestmark = pytest.mark.skipif(shutil.which("c++") is None, reason="no C++ comp
 KINDS = ("box", "sphere", "cylinder", "mesh")
 
 
+def obstacle_lists(most: int):
+    """One to ``most`` obstacles for :func:`_scene`: kind, size [m], centre [m], angle [rad]."""
+    obstacle = st.tuples(
+        st.sampled_from(KINDS),
+        st.floats(0.03, 0.3),
+        st.tuples(st.floats(-0.3, 0.8), st.floats(-0.6, 0.6), st.floats(-0.1, 1.0)),
+        st.floats(-3.0, 3.0),
+    )
+    return st.lists(obstacle, min_size=1, max_size=most)
+
+
 def _scene(panda, obstacles) -> tuple[Scene, list]:
     """The obstacles as a scene, and each as ``(coal shape, pose)`` built here."""
     _, collision = panda
@@ -53,16 +64,7 @@ def _scene(panda, obstacles) -> tuple[Scene, list]:
 
 @given(
     fractions=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7),
-    obstacles=st.lists(
-        st.tuples(
-            st.sampled_from(KINDS),
-            st.floats(0.03, 0.3),
-            st.tuples(st.floats(-0.3, 0.8), st.floats(-0.6, 0.6), st.floats(-0.1, 1.0)),
-            st.floats(-3.0, 3.0),
-        ),
-        min_size=1,
-        max_size=4,
-    ),
+    obstacles=obstacle_lists(4),
     cutoff=st.sampled_from([0.05, 0.1, 10.0]),
 )
 @settings(max_examples=30, deadline=None)
@@ -106,16 +108,7 @@ def test_native_and_python_narrow_phases_agree_with_coal(panda, fractions, obsta
 @given(
     start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7),
     steps=st.lists(st.tuples(st.integers(0, 6), st.floats(-0.05, 0.05)), min_size=5, max_size=40),
-    obstacles=st.lists(
-        st.tuples(
-            st.sampled_from(KINDS),
-            st.floats(0.03, 0.3),
-            st.tuples(st.floats(-0.3, 0.8), st.floats(-0.6, 0.6), st.floats(-0.1, 1.0)),
-            st.floats(-3.0, 3.0),
-        ),
-        min_size=1,
-        max_size=3,
-    ),
+    obstacles=obstacle_lists(3),
     influence=st.sampled_from([0.05, 0.1, 0.3]),
     # Small steps stay within one band (the near rows only), large ones make full passes.
     scale=st.sampled_from([1.0, 0.02, 0.001]),

@@ -142,7 +142,10 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         hardware.close()
 
 
-def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball_urdf):
+def _ball_arm_before_the_box(harness, ball_urdf):
+    """The ball arm with collision avoidance and the box on the straight path between START_Q and
+    GOAL_Q, taken by the controller: ``(model, hardware, node, centre, send)``; ``send()``
+    publishes one twist of 0.1 m/s towards the box."""
     model = load_robot(ball_urdf)
     start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
     centre = 0.5 * (start[:3, 3] + goal[:3, 3])
@@ -160,15 +163,23 @@ def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball
         harness.wait_matched(topic, MarkerArray)
         harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
         assert harness.spin_until(lambda: len(node.collision.scene) == 1, 3)
-        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])  # 0.1 m/s
-        harness.wait_matched(f"{node.test_namespace}/twist_command", TwistStamped)
+        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])
+        twist_topic = f"{node.test_namespace}/twist_command"
+        harness.wait_matched(twist_topic, TwistStamped)
+    except BaseException:
+        hardware.close()
+        raise
 
-        def send():
-            stamp = harness.node.get_clock().now().to_msg()
-            harness.publish(
-                f"{node.test_namespace}/twist_command", make_twist_stamped((0, 0, 0), towards, "base_link", stamp)
-            )
+    def send():
+        stamp = harness.node.get_clock().now().to_msg()
+        harness.publish(twist_topic, make_twist_stamped((0, 0, 0), towards, "base_link", stamp))
 
+    return model, hardware, node, centre, send
+
+
+def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball_urdf):
+    model, hardware, _, centre, send = _ball_arm_before_the_box(harness, ball_urdf)
+    try:
         harness.spin_for(3.0, every=send)  # 0.3 m of commanded travel: the box is 0.1 m away
         distances = [_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history)]
         assert min(distances) >= SAFETY - 1e-3, min(distances)
@@ -190,33 +201,14 @@ def test_a_stall_within_the_arms_command_timeout_keeps_the_safety_distance(harne
     # on a command after a timeout below hold_time cannot be taken within d_s by a stall of any
     # length. Stalled 0.4 s where the damper binds (d ~ 0.03 m): a held-forever arm closes
     # 25 mm there (through d_s), one with a 0.2 s timeout 12.5 mm (past d_s - 1 mm).
-    model = load_robot(ball_urdf)
-    start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
-    centre = 0.5 * (start[:3, 3] + goal[:3, 3])
-    model, hardware, node, _ = start_held_arm(
-        harness,
-        ball_urdf,
-        START_Q,
-        arm_command_timeout=ARM_COMMAND_TIMEOUT,
-        collision_avoidance=True,
-        collision_pair_samples=100,
-        task="position",
-    )
+    model, hardware, node, centre, send = _ball_arm_before_the_box(harness, ball_urdf)
     try:
         hold_time = node.law.qp.collision_limit.hold_time
         assert hold_time == pytest.approx((0.10 - SAFETY) / 0.5) and ARM_COMMAND_TIMEOUT < hold_time
-        topic = f"{node.test_namespace}/collision_objects"
-        harness.wait_matched(topic, MarkerArray)
-        harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
-        assert harness.spin_until(lambda: len(node.collision.scene) == 1, 3)
-        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])  # 0.1 m/s
-        twist_topic = f"{node.test_namespace}/twist_command"
-        harness.wait_matched(twist_topic, TwistStamped)
         stalled_at = None
         deadline = time.monotonic() + 4.0
         while time.monotonic() < deadline:
-            stamp = harness.node.get_clock().now().to_msg()
-            harness.publish(twist_topic, make_twist_stamped((0, 0, 0), towards, "base_link", stamp))
+            send()
             harness.spin_for(0.004)
             distance = _ball_box_distance(model, hardware.positions(), centre, BOX_EXTENTS)
             if stalled_at is None and distance < 0.03:
