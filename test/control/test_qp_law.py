@@ -262,3 +262,23 @@ def test_config_errors_say_what_is_valid(ball_arm):
         QpController(model, QpConfig(posture=PostureTask(np.zeros(2))))
     with pytest.raises(ValueError, match=r"max_acceleration"):
         QpController(model, replace(QpConfig(), max_acceleration=-1.0))
+
+
+def test_the_damper_names_joint_limits_too_soft_for_it():
+    from manip_kin.control.joint_limits import JointLimit, JointLimits
+    from manip_kin.control.qp.limits import CollisionLimit
+    from manip_kin.core.robots import load_robot
+
+    limit = CollisionLimit(checker=None, safety_distance=0.02, influence_distance=0.10, gain=0.5)
+    assert limit.hold_time == pytest.approx(0.08 / 0.5)
+    assert limit.braking_problem(0.3) == ""  # stops within twice the hold time
+    problem = limit.braking_problem(0.4)
+    assert "0.4 s" in problem and "collision_gain <= 0.4 m/s" in problem  # 2 · 0.08 m / 0.4 s
+    # From 2 rad/s at 1 rad/s² (2 s), with the jerk ramp at 50 rad/s³ (1 / 50 s): 2.02 s.
+    model = load_robot("scara")
+    soft = JointLimit(True, 2.0, True, 1.0, False, 1.0, True, 50.0)
+    limits = JointLimits.of(model, {name: soft for name in model.joint_names})
+    stopping = limits.stopping_time(limits.velocity)
+    assert stopping == pytest.approx(2.02)
+    problem = limit.braking_problem(stopping)
+    assert "2.02 s" in problem and "collision_gain <= 0.0792 m/s" in problem  # 2 · 0.08 m / 2.02 s

@@ -172,5 +172,23 @@ class CollisionLimit:
         """
         return (self.influence_distance - self.safety_distance) / self.gain
 
+    def braking_problem(self, stopping_time: float) -> str:
+        """Why a command filter that takes ``stopping_time`` [s] to stop a joint from its
+        velocity limit may let a pair come within ``d_s`` ("" when it fits).
+
+        The damper starts to slow a pair closing at ``v`` at ``d − d_s = v · hold_time``; a
+        filter that stops in ``T`` (slowing steadily) covers ``v · T / 2`` meanwhile, so it stops
+        in time while ``T <= 2 · hold_time``. That is needed, not enough: a pair that enters
+        ``d_i`` faster than the filter can stop within ``d_i − d_s`` comes nearer all the same.
+        """
+        if stopping_time <= 2.0 * self.hold_time:
+            return ""
+        fitting_gain = 2.0 * (self.influence_distance - self.safety_distance) / stopping_time
+        return (
+            f"the joint limits take up to {stopping_time:.3g} s to stop a joint from its velocity limit, "
+            f"more than twice the damper's {self.hold_time:.3g} s: a pair may come within collision_safety_distance "
+            f"(collision_gain <= {fitting_gain:.3g} m/s, or a wider collision_influence_distance, would fit)"
+        )
+
     def rows(self, q: np.ndarray) -> DamperRows:
         return self.checker.evaluate(q, self.influence_distance, self.safety_distance, self.gain)

@@ -63,14 +63,14 @@ def controller_setup(model: RobotModel, params: ParamStruct, collision, dt: floa
         respect_position_limits=params.respect_position_limits,
     )
     controller = CartesianController(model, config)
-    law = collision.configure(model, params, controller, dt)  # the QP, or controller
-    supervisor_config = controller_supervisor_config(params, controller)
-    diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
     limits = joint_limits_from_params(model, params)
     # The law keeps q + q̇·horizon within the position limits: with the horizon of a stop
     # from full speed, a joint nears a limit as slowly as the filter lets it stop, so the
     # law (not only the filter's braking) knows the joint is held and redistributes the task.
     full_stop = limits.stopping_time(np.where(np.isfinite(limits.velocity), limits.velocity, 0.0))
+    law = collision.configure(model, params, controller, dt, full_stop)  # the QP, or controller
+    supervisor_config = controller_supervisor_config(params, controller)
+    diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
     return ControllerSetup(
         controller=controller,
         law=law,

@@ -131,10 +131,11 @@ class CollisionInputs:
 
     # --- configuration --------------------------------------------------------------------------
 
-    def configure(self, model, params: ParamStruct, plain: CartesianController, dt: float):
+    def configure(self, model, params: ParamStruct, plain: CartesianController, dt: float, stopping_time: float):
         """The law the controller is to step: the QP (collision avoidance or a posture), else
         ``plain``. Nothing changes here: the node swaps its ``law`` once its whole
-        configuration is built (a refused change keeps the old one).
+        configuration is built (a refused change keeps the old one). ``stopping_time`` [s]: the
+        command filter's stop of a joint from its velocity limit (checked against the damper).
 
         Raises:
             ManipKinError: a posture of the wrong length, distances that do not fit (the
@@ -162,6 +163,9 @@ class CollisionInputs:
                 "moving on the last command until its timeout) cannot take a pair within collision_safety_distance; "
                 "keep the arm's command timeout below it"
             )
+            braking = qp.collision_limit.braking_problem(stopping_time)
+            if braking:
+                self.node.get_logger().warning(f"collision damper: {braking}")
         if self.law is not None:
             qp.fallback_count = self.law.qp.fallback_count  # counted over the node's life
         return CollisionLaw(qp, plain, dt)
