@@ -257,30 +257,36 @@ int mk_narrow_compute(void* handle, const double* placed, const int* rows, int r
 
 // The broad phase's arrays for the pairs of the last mk_narrow_set_scene (P of them), dof joints:
 // radius_sums (P), reach_pairs (dof x P), moves_first and moves_second (P x dof), the obstacles'
-// bounding-sphere centres (3 each), and band [m]. Resets its state. Returns 0.
+// bounding-sphere centres (3 each), and band [m]. Resets its state. Returns 0, or -1 (see
+// mk_narrow_error) with no broad phase set.
 int mk_narrow_set_broad(void* handle, int dof, double band, const double* radius_sums, const double* reach_pairs,
                         const double* moves_first, const double* moves_second, const double* obstacle_centres) {
   auto* phase = static_cast<NarrowPhase*>(handle);
-  BroadPhase& broad = phase->broad;
-  const int pairs = static_cast<int>(phase->first.size());
-  const int obstacles = static_cast<int>(phase->shapes.size()) - phase->robot_count;
-  broad = BroadPhase();
-  broad.dof = dof;
-  broad.band = band;
-  broad.radius_sums.assign(radius_sums, radius_sums + pairs);
-  broad.reach_pairs.assign(reach_pairs, reach_pairs + dof * pairs);
-  broad.reach_most.assign(dof, 0.0);
-  for (int j = 0; j < dof; ++j)
-    for (int k = 0; k < pairs; ++k) broad.reach_most[j] = std::max(broad.reach_most[j], reach_pairs[j * pairs + k]);
-  broad.moves_first.assign(moves_first, moves_first + pairs * dof);
-  broad.moves_second.assign(moves_second, moves_second + pairs * dof);
-  broad.centres.assign(3 * (phase->robot_count + obstacles), 0.0);
-  std::copy(obstacle_centres, obstacle_centres + 3 * obstacles, broad.centres.begin() + 3 * phase->robot_count);
-  broad.lower.assign(pairs, -INFINITY);
-  broad.travel.assign(dof, 0.0);
-  broad.lines.assign(static_cast<size_t>(std::max(pairs, 1)) * kRowWidth, 0.0);
-  broad.set = true;
-  return 0;
+  try {
+    BroadPhase broad;
+    const int pairs = static_cast<int>(phase->first.size());
+    const int obstacles = static_cast<int>(phase->shapes.size()) - phase->robot_count;
+    broad.dof = dof;
+    broad.band = band;
+    broad.radius_sums.assign(radius_sums, radius_sums + pairs);
+    broad.reach_pairs.assign(reach_pairs, reach_pairs + dof * pairs);
+    broad.reach_most.assign(dof, 0.0);
+    for (int j = 0; j < dof; ++j)
+      for (int k = 0; k < pairs; ++k) broad.reach_most[j] = std::max(broad.reach_most[j], reach_pairs[j * pairs + k]);
+    broad.moves_first.assign(moves_first, moves_first + pairs * dof);
+    broad.moves_second.assign(moves_second, moves_second + pairs * dof);
+    broad.centres.assign(3 * (phase->robot_count + obstacles), 0.0);
+    std::copy(obstacle_centres, obstacle_centres + 3 * obstacles, broad.centres.begin() + 3 * phase->robot_count);
+    broad.lower.assign(pairs, -INFINITY);
+    broad.travel.assign(dof, 0.0);
+    broad.lines.assign(static_cast<size_t>(std::max(pairs, 1)) * kRowWidth, 0.0);
+    broad.set = true;
+    phase->broad = std::move(broad);
+    return 0;
+  } catch (const std::exception& error) {
+    last_error = error.what();
+    return -1;
+  }
 }
 
 // One cycle of CollisionChecker._near_pairs: the broad phase at q (dof values) with the robot

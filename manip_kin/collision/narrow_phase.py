@@ -281,7 +281,8 @@ class NativeNarrowPhase:
             np.ascontiguousarray(a, dtype=float)
             for a in (radius_sums, reach_pairs, moves_first, moves_second, obstacle_centres)
         ]
-        self._library.mk_narrow_set_broad(self._handle, dof, band, *[a.ctypes.data for a in arrays])
+        if self._library.mk_narrow_set_broad(self._handle, dof, band, *[a.ctypes.data for a in arrays]):
+            raise RuntimeError(f"narrow phase: {_last_error(self._library)}")
         self._found_rows = np.zeros(max(pairs, 1), dtype=np.intc)
         self._found_columns = np.zeros((max(pairs, 1), ROW_WIDTH))
         self._matrix = np.zeros((max(pairs, 1), dof))
