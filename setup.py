@@ -27,12 +27,13 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "manip_kin = manip_kin.cli:main",
-            "robot_state = manip_kin.ros.nodes.robot_state:main",
-            "cartesian_controller = manip_kin.ros.nodes.cartesian_controller:main",
-            "trajectory_generator = manip_kin.ros.nodes.trajectory_generator:main",
-            "recorder = manip_kin.ros.nodes.recorder:main",
-            "live_view = manip_kin.ros.nodes.live_view:main",
+            # manip_kin.entry: each imports its module's main, ending quietly on a Ctrl-C meanwhile.
+            "manip_kin = manip_kin.entry:manip_kin",
+            "robot_state = manip_kin.entry:robot_state",
+            "cartesian_controller = manip_kin.entry:cartesian_controller",
+            "trajectory_generator = manip_kin.entry:trajectory_generator",
+            "recorder = manip_kin.entry:recorder",
+            "live_view = manip_kin.entry:live_view",
         ],
     },
 )

@@ -104,6 +104,8 @@ class OperationError(ManipKinError, RuntimeError):
 #: Process exit codes: 2 for an :class:`InputError`, 1 for any other failure.
 EXIT_INPUT_ERROR = 2
 EXIT_FAILURE = 1
+#: Stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
 
 
 def exit_code_for(error: BaseException) -> int:

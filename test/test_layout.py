@@ -33,6 +33,7 @@ WINGS = (
     "viz",
     "ros.nodes",
     "cli",
+    "entry",
 )
 
 #: The upward imports there are, each with its reason (none: the codegen redesign of issue 25

@@ -13,7 +13,7 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from manip_kin.errors import ManipKinError, exit_code_for
+from manip_kin.errors import EXIT_INTERRUPTED, ManipKinError, exit_code_for
 
 # Order is the order of `manip_kin --help`.
 COMMAND_MODULES = (
@@ -62,7 +62,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # `ros2 run` may append ROS arguments; they are not ours.
     if "--ros-args" in args_list:
         args_list = args_list[: args_list.index("--ros-args")]
-    parser = build_parser()
+    try:
+        parser = build_parser()  # imports every command's module: a Ctrl-C may land here
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
     args = parser.parse_args(args_list)
     try:
         return int(args.run(args) or 0)
@@ -70,7 +73,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"manip_kin {args.command}: error: {error}", file=sys.stderr)
         return exit_code_for(error)
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         return 0
 

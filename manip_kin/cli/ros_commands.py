@@ -35,7 +35,7 @@ from manip_kin.cli.common import (
     pose_from_args,
     print_json,
 )
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.errors import EXIT_INTERRUPTED, InvalidArgumentError
 
 
 def register(subparsers) -> None:
@@ -215,7 +215,7 @@ def stop_on_interrupt(command: str, client, nodes: tuple[str, ...]) -> int:
         except PipelineError as error:
             print(f"manip_kin {command}: could not stop {node}: {error}", file=sys.stderr)
     print(f"manip_kin {command}: interrupted: stopped the motion ({', '.join(nodes)})", file=sys.stderr)
-    return 130
+    return EXIT_INTERRUPTED
 
 
 def run_goal(args: argparse.Namespace) -> int:

@@ -28,7 +28,7 @@ import numpy as np
 from manip_kin.cli.common import add_namespace_argument, namespace_from_args
 from manip_kin.cli.teleop_keys import KEY_HELP, TeleopState, apply_key, nearest_limit, status_line
 from manip_kin.cli.teleop_streaming import JOG_TOPIC, TWIST_TOPIC, CommandStream, arm_frames, frames_from_urdf
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.errors import EXIT_INTERRUPTED, InvalidArgumentError
 
 STATUS_PERIOD_S = 0.1
 # Escape sequences (arrow and function keys) are dropped whole: their letters are not commands.
@@ -207,7 +207,7 @@ def run_teleop(args: argparse.Namespace) -> int:
             with cbreak_terminal(fd):
                 code = _loop(teleop, fd, 1.0 / args.rate)
         except KeyboardInterrupt:
-            code = 130
+            code = EXIT_INTERRUPTED
         except SystemExit as leaving:
             code = int(leaving.code or 0)
         finally:

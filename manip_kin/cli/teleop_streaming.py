@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from manip_kin.cli.common import add_json_argument, add_namespace_argument, namespace_from_args, print_json
-from manip_kin.errors import InvalidArgumentError
+from manip_kin.errors import EXIT_INTERRUPTED, InvalidArgumentError
 
 TWIST_TOPIC = "twist_command"
 JOG_TOPIC = "joint_jog"
@@ -256,7 +256,7 @@ def _run_stream(args, topic: str, prepare, describe) -> int:
         try:
             streamed = stream_for(client, send, args.duration, args.rate)
         except KeyboardInterrupt:
-            code, streamed = 130, time.monotonic() - started
+            code, streamed = EXIT_INTERRUPTED, time.monotonic() - started
         finally:
             stopped = stream.stop()
         payload.update(topic=client.topic(topic), messages=stream.published[topic], seconds=streamed, stopped=stopped)

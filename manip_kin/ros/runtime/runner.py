@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 
 from rclpy.node import Node
 
-from manip_kin.errors import EXIT_INPUT_ERROR, ManipKinError, exit_code_for
+from manip_kin.errors import EXIT_INPUT_ERROR, EXIT_INTERRUPTED, ManipKinError, exit_code_for
 
 
 def wants_help(argv: Sequence[str], usage: str) -> bool:
@@ -248,10 +248,13 @@ def run_node(
         :class:`~manip_kin.errors.OperationError`); the reason is printed on one line.
         Also 1 when the node's loop gave up (see ``LoopingNode``), so that a supervisor restarts it.
     """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    try:  # a Ctrl-C before the stop handlers below are in place: nothing has started
+        import rclpy
+        from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    from manip_kin.ros.runtime.looping_node import LoopGaveUpError
+        from manip_kin.ros.runtime.looping_node import LoopGaveUpError
+    except KeyboardInterrupt:
+        return EXIT_INTERRUPTED
 
     argv = list(sys.argv if argv is None else argv)
     if wants_help(argv, usage):
@@ -303,6 +306,10 @@ def run_node(
             return 1
         try:
             try:  # a signal may land before spin() starts: the same clean stop
+                if stop_signals.received.is_set() and not node.context.ok():
+                    # Stopped while it started: an executor made now raises half-built (and
+                    # its __del__ then prints an AttributeError).
+                    raise ExternalShutdownException()
                 executor = SingleThreadedExecutor()
                 executor.add_node(node)
                 if halt is None:
