@@ -233,13 +233,20 @@ class CollisionChecker:
         self._budget = 0.0
         #: How many pairs coal computed in the last call (the others were skipped).
         self.pairs_computed = 0
-        self._reach_most = self._reach_pairs.max(axis=1, initial=0.0).tolist()
+        self._reach_most_array = self._reach_pairs.max(axis=1, initial=0.0)
+        self._reach_most = self._reach_most_array.tolist()
 
     @property
     def shape_pairs(self) -> np.ndarray:
         """The checked pairs as shape indices ``(first, second)``: robot shapes in the collision
         model's order, then the obstacles taken; shape (P, 2)."""
         return self._pairs
+
+    @property
+    def reach_most(self) -> np.ndarray:
+        """Per joint, the most any checked pair's distance can fall per unit of its motion
+        [m per rad | m per m] (:func:`~manip_kin.collision.geometry.joint_reach`), shape (n,)."""
+        return self._reach_most_array
 
     @property
     def obstacle_count(self) -> int:

@@ -120,6 +120,10 @@ class JointLimits:
     acceleration: np.ndarray
     jerk: np.ndarray
 
+    def __post_init__(self):
+        # 1/J, 0 without a jerk bound: the jerk ramps' durations per unit of acceleration [s³/rad].
+        object.__setattr__(self, "_jerk_ramp", np.where(np.isfinite(self.jerk), 1.0 / self.jerk, 0.0))
+
     @classmethod
     def of(cls, model: RobotModel, per_joint: Mapping[str, JointLimit] | None = None) -> JointLimits:
         """The limits of ``model``'s joints: ``per_joint`` by name, the defaults for the rest.
@@ -170,6 +174,25 @@ class JointLimits:
             speed = abs(v) + 0.5 * a * a * ramp
             worst = max(worst, abs(a) * ramp + speed / bound + bound * ramp)
         return worst
+
+    def stopping_travel(self, velocity: Sequence[float], acceleration: Sequence[float]) -> np.ndarray:
+        """An upper bound on how far each joint goes [rad | m] from a command ``velocity`` with
+        ``acceleration`` until a stop within the limits brings it to rest, signed as its motion,
+        shape (n,); 0 for a joint without an acceleration bound.
+
+        Undo a rising acceleration ``a`` (``a/J``, the speed growing to ``v' = v + a²/(2J)``),
+        then stop from ``v'``: ``v'·a/J + v'²/(2A) + v'·A/(2J)``. The last two are the
+        time-optimal stop's distance where it reaches ``-A``, and bound it where it does not (by
+        the AM-GM inequality), so it is never below :func:`stopping_distance`.
+        """
+        v, a = np.asarray(velocity, dtype=float), np.asarray(acceleration, dtype=float)
+        direction = np.where(v != 0.0, np.sign(v), np.sign(a))
+        rising = np.maximum(a * direction, 0.0)
+        bound, ramp = self.acceleration, self._jerk_ramp
+        with np.errstate(invalid="ignore"):  # inf * 0 where a joint has no acceleration bound
+            peak = np.abs(v) + 0.5 * rising * rising * ramp
+            travel = peak * (rising * ramp + peak / (2.0 * bound) + 0.5 * bound * ramp)
+        return np.where(np.isfinite(bound), direction * travel, 0.0)
 
 
 def stopping_distance(speed: float, acceleration: float, max_acceleration: float, max_jerk: float) -> float:

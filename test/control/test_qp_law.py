@@ -264,21 +264,68 @@ def test_config_errors_say_what_is_valid(ball_arm):
         QpController(model, replace(QpConfig(), max_acceleration=-1.0))
 
 
-def test_the_damper_names_joint_limits_too_soft_for_it():
+def _through_the_filter(law, model, soft, q0, goal, steps: int, braking: bool, dt: float = 0.004):
+    """The QP's rates through a CommandFilter with the ``soft`` limits, integrated: the positions."""
+    from manip_kin.control.command_filter import CommandFilter
+
+    command_filter = CommandFilter(soft, model.lower, model.upper, dt)
+    q, path = np.array(q0, dtype=float), []
+    for _ in range(steps):
+        output = law.step(q, goal, dt=dt, command=command_filter.state if braking else None)
+        q = q + np.array(command_filter.update(output.qdot, q)) * dt
+        path.append(q)
+    return path
+
+
+@pytest.mark.parametrize("acceleration", [1.0, 0.3])
+def test_with_the_filters_braking_counted_soft_joint_limits_keep_the_safety_distance(ball_arm, acceleration):
+    """A command filter that stops slowly (1 and 0.3 rad/s², stops of 2 and 6.7 s from full
+    speed) takes the ball into the box when the dampers assume the rates are applied at once;
+    with its braking counted the ball stops at the safety distance. The distances are closed
+    forms of the ball's spheres against the box."""
+    from collision_robots import ball_centres, point_box_distance
+
     from manip_kin.control.joint_limits import JointLimit, JointLimits
-    from manip_kin.control.qp.limits import CollisionLimit
+
+    model, collision = ball_arm
+    start_q, goal_q = np.array([-0.6, 0.4, 0.8]), np.array([0.6, 0.4, 0.8])
+    start, goal = frame_pose(model, start_q), frame_pose(model, goal_q)
+    centre, extents = 0.5 * (start[:3, 3] + goal[:3, 3]), (0.08, 0.08, 0.08)
+    scene = Scene()
+    scene.add(make_obstacle(("cell", 1), "box", extents, make_transform(None, centre)))
+    soft = JointLimits.of(
+        model, {n: JointLimit(True, 2.0, True, acceleration, False, 1.0, True, 50.0) for n in model.joint_names}
+    )
+    nearest = {}
+    for braking in (False, True):
+        checker = CollisionChecker(model, collision)
+        checker.update_scene(scene)
+        config = QpConfig(controller=POSITION_TASK, braking=soft)
+        path = _through_the_filter(QpController(model, config, checker), model, soft, start_q, goal, 1500, braking)
+        nearest[braking] = min(
+            point_box_distance(c, centre, extents) - r for q in path for _, c, r in ball_centres(model, q)
+        )
+    assert nearest[True] >= 0.02 - 1e-3, nearest
+    assert nearest[False] < 0.02 - 5e-3, nearest  # the same run without: into the safety distance
+
+
+@given(
+    speed=st.floats(-3.0, 3.0),
+    acceleration=st.floats(-20.0, 20.0),
+    bound=st.floats(0.1, 20.0),
+    jerk=st.floats(1.0, 5000.0) | st.just(math.inf),
+)
+@settings(max_examples=300, deadline=None)
+def test_the_stopping_travel_bounds_the_time_optimal_stop(speed, acceleration, bound, jerk):
+    from manip_kin.control.joint_limits import JointLimit, JointLimits, stopping_distance
     from manip_kin.core.robots import load_robot
 
-    limit = CollisionLimit(checker=None, safety_distance=0.02, influence_distance=0.10, gain=0.5)
-    assert limit.hold_time == pytest.approx(0.08 / 0.5)
-    assert limit.braking_problem(0.3) == ""  # stops within twice the hold time
-    problem = limit.braking_problem(0.4)
-    assert "0.4 s" in problem and "collision_gain <= 0.4 m/s" in problem  # 2 · 0.08 m / 0.4 s
-    # From 2 rad/s at 1 rad/s² (2 s), with the jerk ramp at 50 rad/s³ (1 / 50 s): 2.02 s.
     model = load_robot("scara")
-    soft = JointLimit(True, 2.0, True, 1.0, False, 1.0, True, 50.0)
-    limits = JointLimits.of(model, {name: soft for name in model.joint_names})
-    stopping = limits.stopping_time(limits.velocity)
-    assert stopping == pytest.approx(2.02)
-    problem = limit.braking_problem(stopping)
-    assert "2.02 s" in problem and "collision_gain <= 0.0792 m/s" in problem  # 2 · 0.08 m / 2.02 s
+    limit = JointLimit(True, 5.0, True, bound, False, bound, not math.isinf(jerk), 1.0 if math.isinf(jerk) else jerk)
+    limits = JointLimits.of(model, dict.fromkeys(model.joint_names, limit))
+    travel = limits.stopping_travel([speed] * 4, [acceleration] * 4)[0]
+    direction = math.copysign(1.0, speed) if speed else math.copysign(1.0, acceleration)
+    exact = stopping_distance(abs(speed), acceleration * direction, bound, jerk)
+    assert travel * direction >= exact - 1e-12
+    if acceleration == 0.0 and abs(speed) >= bound * bound / jerk:  # a stop that reaches -A: exact
+        assert travel * direction == pytest.approx(exact, rel=1e-9)

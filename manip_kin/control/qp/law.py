@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.collision.distances import CollisionChecker, DamperRows
+from manip_kin.control.command_filter import FilterState
+from manip_kin.control.joint_limits import JointLimits
 from manip_kin.control.joint_tracking import JointTrackingOutput, joint_tracking_step
 from manip_kin.control.qp.limits import (
     AccelerationLimit,
@@ -66,6 +68,9 @@ class QpConfig:
         collision_gain: ξ, the closing speed allowed at d_i [m/s].
         regularization: μ_min, the least weight on joint-rate changes in the QP's metric
             (H = JᵀJ + max(λ², μ_min) I) [same units as JᵀJ], > 0.
+        braking: the limits of the command filter the rates pass through, or None: the
+            dampers then count each pair's closing while the filter stops (see
+            :class:`~manip_kin.control.qp.limits.CollisionLimit`).
     """
 
     controller: ControllerConfig = ControllerConfig()
@@ -77,6 +82,7 @@ class QpConfig:
     influence_distance: float = 0.10
     collision_gain: float = 0.5
     regularization: float = 1e-4
+    braking: JointLimits | None = None
 
     def __post_init__(self):
         if not (math.isfinite(self.regularization) and self.regularization > 0):
@@ -166,7 +172,13 @@ class QpController:
             AccelerationLimit.of(model, config.max_acceleration) if config.max_acceleration is not None else None
         )
         self.collision_limit = (
-            CollisionLimit(checker, config.collision_safety_distance, config.influence_distance, config.collision_gain)
+            CollisionLimit(
+                checker,
+                config.collision_safety_distance,
+                config.influence_distance,
+                config.collision_gain,
+                config.braking,
+            )
             if checker is not None
             else None
         )
@@ -195,7 +207,14 @@ class QpController:
             box = merge_boxes(box, acceleration)
         return box, acceleration
 
-    def step(self, q: np.ndarray, goal_pose: np.ndarray, goal_twist=None, dt: float = 0.002) -> QpOutput:
+    def step(
+        self,
+        q: np.ndarray,
+        goal_pose: np.ndarray,
+        goal_twist=None,
+        dt: float = 0.002,
+        command: FilterState | None = None,
+    ) -> QpOutput:
         """Joint rates towards ``goal_pose`` within every limit.
 
         Args:
@@ -203,6 +222,7 @@ class QpController:
             goal_pose: goal of the controlled frame in base, shape (4, 4).
             goal_twist: optional feed-forward ``(angular [rad/s], linear [m/s])``.
             dt: control period [s], > 0.
+            command: the command filter's command in force (with ``config.braking``), or None.
 
         Raises:
             InputError: as :meth:`manip_kin.control.resolved_rate.CartesianController.step` for bad input.
@@ -220,7 +240,7 @@ class QpController:
             mu = max(task.damping * task.damping, self.config.regularization)
             return task_jacobian.T @ task_jacobian + mu * self._identity
 
-        qdot, status, bounds = self._solve(q, dt, desired, metric)
+        qdot, status, bounds = self._solve(q, dt, desired, metric, command)
         extra = {}
         if qdot is None:
             task = self.fallback_law.step(q, goal_pose, goal_twist, dt)  # today's law, with its limits
@@ -244,6 +264,7 @@ class QpController:
         qdot_reference: np.ndarray | None = None,
         gain: float = 1.0,
         dt: float = 0.002,
+        command: FilterState | None = None,
     ) -> QpJointOutput:
         """Joint rates towards a joint reference within every limit: ``min ‖q̇ − q̇*‖²`` with
         ``q̇* = q̇_ref + K (q_ref − q)`` (:class:`~manip_kin.control.qp.tasks.JointTask`); the
@@ -254,6 +275,7 @@ class QpController:
             qdot_reference: the reference's velocity (feed-forward), shape (n,), or None (zero).
             gain: K [1/s], >= 0.
             dt: control period [s], > 0.
+            command: as for :meth:`step`.
 
         Raises:
             InputError: as :func:`~manip_kin.control.joint_tracking.joint_tracking_step` for bad input,
@@ -263,7 +285,7 @@ class QpController:
             self._joint_task = JointTask(self.model, gain)
         task = self._joint_task.desired(q, q_reference, qdot_reference, dt)  # checks q, the reference, dt
         q = np.asarray(q, dtype=float)
-        qdot, status, bounds = self._solve(q, dt, task.qdot, lambda: self._identity)
+        qdot, status, bounds = self._solve(q, dt, task.qdot, lambda: self._identity, command)
         extra = {}
         if qdot is None:
             config = self.config.controller
@@ -282,12 +304,12 @@ class QpController:
         return QpJointOutput(qdot=qdot, joint_error=task.joint_error, **self._report(qdot, status, bounds, **extra))
 
     def _solve(
-        self, q: np.ndarray, dt: float, desired: np.ndarray, metric
+        self, q: np.ndarray, dt: float, desired: np.ndarray, metric, command: FilterState | None
     ) -> tuple[np.ndarray | None, SolveStatus, _Bounds]:
         """The rates nearest ``desired`` in the metric ``metric()`` (called only when a limit
         binds) within this cycle's limits; None when the QP is infeasible or the solver fails."""
         box, acceleration = self.limits_box(q, dt)
-        rows = self.collision_limit.rows(q) if self.collision_limit is not None else None
+        rows = self.collision_limit.rows(q, command) if self.collision_limit is not None else None
         bounds = _Bounds(box, acceleration, rows)
         matrix = rows.matrix if rows is not None else None
         bound = rows.bound if rows is not None else None

@@ -18,7 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.collision.distances import CollisionChecker, DamperRows
+from manip_kin.collision.distances import BAND, CollisionChecker, DamperRows
+from manip_kin.control.command_filter import FilterState
+from manip_kin.control.joint_limits import JointLimits
 from manip_kin.core.model import RobotModel
 from manip_kin.errors import InvalidArgumentError
 
@@ -138,18 +140,27 @@ class CollisionLimit:
 
     ``n·(J_a − J_b) q̇ <= ξ (d − d_s) / (d_i − d_s)`` for each pair nearer than ``d_i``.
 
+    With ``braking`` (the limits of a command filter the rates pass through) and the command in
+    force, each pair's ``d`` is first lessened by what it closes while that filter stops the
+    command, ``max(0, n·(J_a − J_b) Δq)`` with ``Δq`` each joint's stopping travel
+    (:meth:`~manip_kin.control.joint_limits.JointLimits.stopping_travel`), and the pairs within
+    ``d_i`` plus the most any shape can move meanwhile are looked at. So the damper binds where
+    the filter must start braking, not where the QP could stop at once.
+
     Attributes:
         checker: the robot's collision checker (holding the scene's obstacles).
         safety_distance: d_s [m], >= 0: the closest allowed approach
             (``collision_safety_distance``).
         influence_distance: d_i [m], > d_s: pairs farther apart are free.
         gain: ξ [m/s], > 0: the closing speed allowed at d_i.
+        braking: the command filter's limits, or None (the rates are applied as they are).
     """
 
     checker: CollisionChecker
     safety_distance: float = 0.02
     influence_distance: float = 0.10
     gain: float = 0.5
+    braking: JointLimits | None = None
 
     def __post_init__(self):
         if not (math.isfinite(self.safety_distance) and self.safety_distance >= 0):
@@ -172,23 +183,24 @@ class CollisionLimit:
         """
         return (self.influence_distance - self.safety_distance) / self.gain
 
-    def braking_problem(self, stopping_time: float) -> str:
-        """Why a command filter that takes ``stopping_time`` [s] to stop a joint from its
-        velocity limit may let a pair come within ``d_s`` ("" when it fits).
-
-        The damper starts to slow a pair closing at ``v`` at ``d − d_s = v · hold_time``; a
-        filter that stops in ``T`` (slowing steadily) covers ``v · T / 2`` meanwhile, so it stops
-        in time while ``T <= 2 · hold_time``. That is needed, not enough: a pair that enters
-        ``d_i`` faster than the filter can stop within ``d_i − d_s`` comes nearer all the same.
-        """
-        if stopping_time <= 2.0 * self.hold_time:
-            return ""
-        fitting_gain = 2.0 * (self.influence_distance - self.safety_distance) / stopping_time
-        return (
-            f"the joint limits take up to {stopping_time:.3g} s to stop a joint from its velocity limit, "
-            f"more than twice the damper's {self.hold_time:.3g} s: a pair may come within collision_safety_distance "
-            f"(collision_gain <= {fitting_gain:.3g} m/s, or a wider collision_influence_distance, would fit)"
+    def rows(self, q: np.ndarray, command: FilterState | None = None) -> DamperRows:
+        """This cycle's damper rows at ``q``, the filter's ``command`` in force (see the class docstring)."""
+        d_i, d_s = self.influence_distance, self.safety_distance
+        if self.braking is None or command is None or not (command.velocity.any() or command.acceleration.any()):
+            return self.checker.evaluate(q, d_i, d_s, self.gain)
+        travel = self.braking.stopping_travel(command.velocity, command.acceleration)
+        reach = float(np.abs(travel) @ self.checker.reach_most)  # the most any pair closes meanwhile
+        # Whole bands: a cutoff that stays the same from cycle to cycle keeps the broad phase's
+        # near rows (a new cutoff is a full pass).
+        rows = self.checker.evaluate(q, d_i + BAND * math.ceil(reach / BAND), d_s, self.gain)
+        if not rows.labels:
+            return rows
+        left = rows.distances - np.maximum(rows.matrix @ travel, 0.0)
+        keep = left < d_i
+        return DamperRows(
+            tuple(label for label, kept in zip(rows.labels, keep.tolist()) if kept),
+            rows.distances[keep],
+            rows.matrix[keep],
+            self.gain * (left[keep] - d_s) / (d_i - d_s),
+            rows.nearest,
         )
-
-    def rows(self, q: np.ndarray) -> DamperRows:
-        return self.checker.evaluate(q, self.influence_distance, self.safety_distance, self.gain)

@@ -68,7 +68,7 @@ def controller_setup(model: RobotModel, params: ParamStruct, collision, dt: floa
     # from full speed, a joint nears a limit as slowly as the filter lets it stop, so the
     # law (not only the filter's braking) knows the joint is held and redistributes the task.
     full_stop = limits.stopping_time(np.where(np.isfinite(limits.velocity), limits.velocity, 0.0))
-    law = collision.configure(model, params, controller, dt, full_stop)  # the QP, or controller
+    law = collision.configure(model, params, controller, dt, limits)  # the QP, or controller
     supervisor_config = controller_supervisor_config(params, controller)
     diagnostics_period_ns = period_ns(params.diagnostics_rate_hz)
     return ControllerSetup(

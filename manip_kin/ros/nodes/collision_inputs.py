@@ -37,6 +37,7 @@ import numpy as np
 from visualization_msgs.msg import Marker, MarkerArray
 
 from manip_kin.collision.distances import CollisionChecker
+from manip_kin.control.joint_limits import JointLimits
 from manip_kin.control.qp.blocked import Blocked, blocked_by, joint_blocked_by
 from manip_kin.control.qp.law import QpConfig, QpController, QpJointOutput, QpOutput, QpReport
 from manip_kin.control.qp.tasks import PostureTask
@@ -57,23 +58,25 @@ MARKER_NS = "collision"
 class CollisionLaw:
     """The QP law with the plain law's interface (``step(q, goal, twist, horizon)``, ``frame_index``,
     ``task``, ``config``), so pose goals and twist commands call either the same way; and
-    :meth:`joint_step` for joint references and jogs."""
+    :meth:`joint_step` for joint references and jogs. ``command_state()`` gives the node's
+    command filter state, which the dampers count the filter's braking from."""
 
-    def __init__(self, qp: QpController, plain: CartesianController, dt: float):
+    def __init__(self, qp: QpController, plain: CartesianController, dt: float, command_state):
         self.qp = qp
         self.plain = plain
         self.dt = dt
+        self.command_state = command_state
         self.frame_index = plain.frame_index
         self.task = plain.task
         self.config = plain.config
 
     def step(self, q, goal_pose, goal_twist=None, horizon=None) -> QpOutput:
         """One QP step over the control period (the QP's position limit has its own gain, not a horizon)."""
-        return self.qp.step(q, goal_pose, goal_twist, self.dt)
+        return self.qp.step(q, goal_pose, goal_twist, self.dt, self.command_state())
 
     def joint_step(self, q, q_reference, qdot_reference, gain: float) -> QpJointOutput:
         """One QP step towards a joint reference over the control period."""
-        return self.qp.joint_step(q, q_reference, qdot_reference, gain, self.dt)
+        return self.qp.joint_step(q, q_reference, qdot_reference, gain, self.dt, self.command_state())
 
 
 class CollisionInputs:
@@ -131,11 +134,11 @@ class CollisionInputs:
 
     # --- configuration --------------------------------------------------------------------------
 
-    def configure(self, model, params: ParamStruct, plain: CartesianController, dt: float, stopping_time: float):
+    def configure(self, model, params: ParamStruct, plain: CartesianController, dt: float, limits: JointLimits):
         """The law the controller is to step: the QP (collision avoidance or a posture), else
         ``plain``. Nothing changes here: the node swaps its ``law`` once its whole
-        configuration is built (a refused change keeps the old one). ``stopping_time`` [s]: the
-        command filter's stop of a joint from its velocity limit (checked against the damper).
+        configuration is built (a refused change keeps the old one). ``limits``: the command
+        filter's, whose braking the dampers count.
 
         Raises:
             ManipKinError: a posture of the wrong length, distances that do not fit (the
@@ -155,6 +158,7 @@ class CollisionInputs:
             collision_safety_distance=params.collision_safety_distance,
             influence_distance=params.collision_influence_distance,
             collision_gain=params.collision_gain,
+            braking=limits,
         )
         qp = QpController(model, config, self.checker)
         if qp.collision_limit is not None:
@@ -163,12 +167,9 @@ class CollisionInputs:
                 "moving on the last command until its timeout) cannot take a pair within collision_safety_distance; "
                 "keep the arm's command timeout below it"
             )
-            braking = qp.collision_limit.braking_problem(stopping_time)
-            if braking:
-                self.node.get_logger().warning(f"collision damper: {braking}")
         if self.law is not None:
             qp.fallback_count = self.law.qp.fallback_count  # counted over the node's life
-        return CollisionLaw(qp, plain, dt)
+        return CollisionLaw(qp, plain, dt, lambda: self.node.command_filter.state)
 
     def switch_problem(self) -> str | None:
         """Why ``~/reload_robot_description`` cannot switch models (the geometry is built at start)."""
