@@ -272,6 +272,8 @@ def _through_the_filter(law, model, soft, q0, goal, steps: int, braking: bool, d
     q, path = np.array(q0, dtype=float), []
     for _ in range(steps):
         output = law.step(q, goal, dt=dt, command=command_filter.state if braking else None)
+        # The status names the nearest pair within the influence distance only (docs/interfaces.md).
+        assert output.nearest_distance < law.config.influence_distance or math.isinf(output.nearest_distance)
         q = q + np.array(command_filter.update(output.qdot, q)) * dt
         path.append(q)
     return path

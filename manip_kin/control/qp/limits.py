@@ -197,10 +197,11 @@ class CollisionLimit:
             return rows
         left = rows.distances - np.maximum(rows.matrix @ travel, 0.0)
         keep = left < d_i
+        nearest = rows.nearest if rows.nearest.distance < d_i else None  # reported within d_i only
         return DamperRows(
             tuple(label for label, kept in zip(rows.labels, keep.tolist()) if kept),
             rows.distances[keep],
             rows.matrix[keep],
             self.gain * (left[keep] - d_s) / (d_i - d_s),
-            rows.nearest,
+            nearest,
         )
