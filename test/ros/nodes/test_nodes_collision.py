@@ -189,21 +189,6 @@ def test_a_twist_command_into_the_box_stops_at_the_safety_distance(harness, ball
         hardware.close()
 
 
-@pytest.mark.parametrize("speed, acceleration", [(0.5, 1.0), (0.1, 0.3)])
-def test_soft_joint_limits_still_stop_a_twist_at_the_safety_distance(harness, ball_urdf, speed, acceleration):
-    # The command filter stops a joint from full speed in 2 s (1 rad/s²) or 6.7 s (0.3 rad/s²):
-    # with dampers that took the rates as applied at once, the ball went 14 and 17 mm into the box.
-    slow = {f"joint_limits.{joint}.max_acceleration": acceleration for joint in ("j1", "j2", "j3")}
-    model, hardware, _, centre, send = _ball_arm_before_the_box(harness, ball_urdf, speed, **slow)
-    try:
-        harness.spin_for(4.0, every=send)
-        distances = [_ball_box_distance(model, q, centre, BOX_EXTENTS) for q in list(hardware.history)]
-        assert min(distances) >= SAFETY - 1e-3, min(distances)
-        assert distances[-1] < SAFETY + 0.01  # it went up to the box
-    finally:
-        hardware.close()
-
-
 def _stall_the_process(seconds: float) -> None:
     """Every thread of this process stopped for ``seconds``: libc's usleep called with the GIL
     held (ctypes.PyDLL keeps it), as a publish that stalls inside rcl does
