@@ -207,6 +207,8 @@ class CollisionChecker:
         # joint that moves both shapes of a pair moves them as one body: it leaves their distance.
         reach = joint_reach(self.model, cm.frames, cm.offsets, cm.centres, cm.radii) @ self._pair_sums
         self._reach_pairs = reach * (1.0 - self._moves_first * self._moves_second).T
+        self._reach_most_array = self._reach_pairs.max(axis=1, initial=0.0)
+        self._reach_most = self._reach_most_array.tolist()
         try:
             self.narrow_phase.set_scene(shapes, poses, pairs)
         except ValueError as error:  # the native one could not take a shape coal's Python bindings could
@@ -217,8 +219,8 @@ class CollisionChecker:
         self._native_broad = isinstance(self.narrow_phase, NativeNarrowPhase)
         if self._native_broad:
             self.narrow_phase.set_broad_phase(
-                BAND, self._radius_sums, self._reach_pairs, self._moves_first, self._moves_second,
-                self._obstacle_centres.reshape(-1, 3),
+                BAND, self._radius_sums, self._reach_pairs, self._reach_most_array, self._moves_first,
+                self._moves_second, self._obstacle_centres.reshape(-1, 3),
             )  # fmt: skip
         # A lower bound on each pair's distance, valid at the configuration _previous.
         self._lower = np.full(len(pairs), -math.inf)
@@ -233,8 +235,6 @@ class CollisionChecker:
         self._budget = 0.0
         #: How many pairs coal computed in the last call (the others were skipped).
         self.pairs_computed = 0
-        self._reach_most_array = self._reach_pairs.max(axis=1, initial=0.0)
-        self._reach_most = self._reach_most_array.tolist()
 
     @property
     def shape_pairs(self) -> np.ndarray:

@@ -38,7 +38,7 @@ struct BroadPhase {
   double band = 0.0;
   std::vector<double> radius_sums;                // P
   std::vector<double> reach_pairs;                // dof x P
-  std::vector<double> reach_most;                 // dof: the largest reach of each joint
+  std::vector<double> reach_most;                 // dof: each joint's largest reach over the pairs
   std::vector<double> moves_first, moves_second;  // P x dof: 1 where the joint moves the shape
   std::vector<double> centres;                    // shapes x 3: bounding-sphere centres
   std::vector<double> lower;                      // P: a lower bound on each pair's distance
@@ -256,11 +256,13 @@ int mk_narrow_compute(void* handle, const double* placed, const int* rows, int r
 }
 
 // The broad phase's arrays for the pairs of the last mk_narrow_set_scene (P of them), dof joints:
-// radius_sums (P), reach_pairs (dof x P), moves_first and moves_second (P x dof), the obstacles'
-// bounding-sphere centres (3 each), and band [m]. Resets its state. Returns 0, or -1 (see
+// radius_sums (P), reach_pairs (dof x P), reach_most (dof: each joint's largest reach over the
+// pairs), moves_first and moves_second (P x dof), the obstacles' bounding-sphere centres (3
+// each), and band [m]. Resets its state. Returns 0, or -1 (see
 // mk_narrow_error) with no broad phase set.
 int mk_narrow_set_broad(void* handle, int dof, double band, const double* radius_sums, const double* reach_pairs,
-                        const double* moves_first, const double* moves_second, const double* obstacle_centres) {
+                        const double* reach_most, const double* moves_first, const double* moves_second,
+                        const double* obstacle_centres) {
   auto* phase = static_cast<NarrowPhase*>(handle);
   try {
     BroadPhase broad;
@@ -270,9 +272,7 @@ int mk_narrow_set_broad(void* handle, int dof, double band, const double* radius
     broad.band = band;
     broad.radius_sums.assign(radius_sums, radius_sums + pairs);
     broad.reach_pairs.assign(reach_pairs, reach_pairs + dof * pairs);
-    broad.reach_most.assign(dof, 0.0);
-    for (int j = 0; j < dof; ++j)
-      for (int k = 0; k < pairs; ++k) broad.reach_most[j] = std::max(broad.reach_most[j], reach_pairs[j * pairs + k]);
+    broad.reach_most.assign(reach_most, reach_most + dof);
     broad.moves_first.assign(moves_first, moves_first + pairs * dof);
     broad.moves_second.assign(moves_second, moves_second + pairs * dof);
     broad.centres.assign(3 * (phase->robot_count + obstacles), 0.0);

@@ -175,7 +175,7 @@ def _library() -> ctypes.CDLL:
     library.mk_narrow_compute.restype = ctypes.c_int
     library.mk_narrow_compute.argtypes = [pointer, pointer, pointer, ctypes.c_int, pointer]
     library.mk_narrow_set_broad.restype = ctypes.c_int
-    library.mk_narrow_set_broad.argtypes = [pointer, ctypes.c_int, ctypes.c_double, *[pointer] * 5]
+    library.mk_narrow_set_broad.argtypes = [pointer, ctypes.c_int, ctypes.c_double, *[pointer] * 6]
     library.mk_narrow_near.restype = ctypes.c_int
     library.mk_narrow_near.argtypes = [pointer, pointer, pointer, ctypes.c_double, *[pointer] * 5]
     if library.mk_narrow_row_width() != ROW_WIDTH:
@@ -267,19 +267,21 @@ class NativeNarrowPhase:
         band: float,
         radius_sums: np.ndarray,
         reach_pairs: np.ndarray,
+        reach_most: np.ndarray,
         moves_first: np.ndarray,
         moves_second: np.ndarray,
         obstacle_centres: np.ndarray,
     ) -> None:
         """The broad phase's arrays for the pairs of the last :meth:`set_scene` (P pairs, n
         joints), as :class:`~manip_kin.collision.distances.CollisionChecker` derives them:
-        ``radius_sums`` (P,) [m], ``reach_pairs`` (n, P) [m per rad | m], ``moves_first`` and
+        ``radius_sums`` (P,) [m], ``reach_pairs`` (n, P) [m per rad | m] and its largest per joint
+        ``reach_most`` (n,), ``moves_first`` and
         ``moves_second`` (P, n) of 0 and 1, ``obstacle_centres`` (m, 3) [m]; ``band`` [m]. Resets
         the bounds :meth:`near_pairs` carries between calls."""
         pairs, dof = np.shape(moves_first)
         arrays = [
             np.ascontiguousarray(a, dtype=float)
-            for a in (radius_sums, reach_pairs, moves_first, moves_second, obstacle_centres)
+            for a in (radius_sums, reach_pairs, reach_most, moves_first, moves_second, obstacle_centres)
         ]
         if self._library.mk_narrow_set_broad(self._handle, dof, band, *[a.ctypes.data for a in arrays]):
             raise RuntimeError(f"narrow phase: {_last_error(self._library)}")

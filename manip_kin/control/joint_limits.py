@@ -167,10 +167,9 @@ class JointLimits:
         """
         worst = 0.0
         accelerations = acceleration if acceleration is not None else [0.0] * len(velocity)
-        for v, a, bound, jerk in zip(velocity, accelerations, self.acceleration, self.jerk):
+        for v, a, bound, ramp in zip(velocity, accelerations, self.acceleration, self._jerk_ramp):
             if not math.isfinite(bound):
                 continue
-            ramp = 1.0 / jerk if math.isfinite(jerk) else 0.0
             speed = abs(v) + 0.5 * a * a * ramp
             worst = max(worst, abs(a) * ramp + speed / bound + bound * ramp)
         return worst

@@ -142,10 +142,10 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         hardware.close()
 
 
-def _ball_arm_before_the_box(harness, ball_urdf, speed: float = 0.1, **params):
-    """The ball arm with collision avoidance (and ``params``) and the box on the straight path
-    between START_Q and GOAL_Q, taken by the controller: ``(model, hardware, node, centre,
-    send)``; ``send()`` publishes one twist of ``speed`` [m/s] towards the box."""
+def _ball_arm_before_the_box(harness, ball_urdf):
+    """The ball arm with collision avoidance and the box on the straight path between START_Q and
+    GOAL_Q, taken by the controller: ``(model, hardware, node, centre, send)``; ``send()``
+    publishes one twist of 0.1 m/s towards the box."""
     model = load_robot(ball_urdf)
     start, goal = frame_pose(model, START_Q), frame_pose(model, GOAL_Q)
     centre = 0.5 * (start[:3, 3] + goal[:3, 3])
@@ -157,14 +157,13 @@ def _ball_arm_before_the_box(harness, ball_urdf, speed: float = 0.1, **params):
         collision_avoidance=True,
         collision_pair_samples=100,
         task="position",
-        **params,
     )
     try:
         topic = f"{node.test_namespace}/collision_objects"
         harness.wait_matched(topic, MarkerArray)
         harness.publish(topic, _box_marker(centre, BOX_EXTENTS))
         assert harness.spin_until(lambda: len(node.collision.scene) == 1, 3)
-        towards = speed * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])
+        towards = 0.1 * (goal[:3, 3] - start[:3, 3]) / np.linalg.norm(goal[:3, 3] - start[:3, 3])
         twist_topic = f"{node.test_namespace}/twist_command"
         harness.wait_matched(twist_topic, TwistStamped)
     except BaseException:
