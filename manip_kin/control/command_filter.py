@@ -54,7 +54,7 @@ import numpy as np
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, RuckigError, Synchronization
 
 from manip_kin.control.joint_limits import JointLimits, stopping_distance
-from manip_kin.control.late_updates import LateUpdateMakeUp
+from manip_kin.control.late_updates import DriveTime, LateUpdateMakeUp
 from manip_kin.control.streamed_goal import minmod
 from manip_kin.errors import InvalidArgumentError
 
@@ -92,10 +92,13 @@ class FilterResult(StrEnum):
 
 @dataclass(frozen=True)
 class FilterState:
-    """The filter's last command [rad/s | m/s] and its acceleration [rad/s² | m/s²], shapes (n,)."""
+    """The filter's last command [rad/s | m/s] and its acceleration [rad/s² | m/s²], shapes (n,),
+    and how many periods a command has recently driven the arm for, >= 1
+    (:class:`~manip_kin.control.late_updates.DriveTime`): what a stop's time and travel stretch by."""
 
     velocity: np.ndarray
     acceleration: np.ndarray
+    stretch: float = 1.0
 
 
 class CommandFilter:
@@ -132,6 +135,7 @@ class CommandFilter:
         self._synchronised = True
         #: Cycles computed without time synchronisation because ruckig found none.
         self.unsynchronised_cycles = 0
+        self.drive_time = DriveTime(self.dt)
         self.configure(limits, limit_velocity)
 
     def configure(self, limits: JointLimits, limit_velocity: bool = True) -> None:
@@ -153,7 +157,7 @@ class CommandFilter:
     @property
     def state(self) -> FilterState:
         """The last command and its acceleration."""
-        return FilterState(np.array(self._velocity), np.array(self._acceleration))
+        return FilterState(np.array(self._velocity), np.array(self._acceleration), self.drive_time.periods)
 
     @property
     def at_rest(self) -> bool:
@@ -192,6 +196,7 @@ class CommandFilter:
                 corrects it itself.
         """
         target = [float(v) for v in target]
+        self.drive_time.update(elapsed)
         if self.filtering:
             target = self._make_up.raised(target, self._velocity, elapsed, feed_forward, bool(self.braking_joints))
         scale = 1.0

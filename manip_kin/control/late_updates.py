@@ -102,3 +102,35 @@ class LateUpdateMakeUp:
             self.owed = None
             return target
         return raised
+
+
+#: How far the drive-time estimate moves towards an update's sample: quickly towards a longer
+#: one, slowly back, so that a loading that comes and goes keeps it near its worst [per update].
+DRIVE_TIME_RISE = 0.1
+DRIVE_TIME_FALL = 0.01
+
+
+class DriveTime:
+    """How long each command has recently driven the arm, in periods (>= 1).
+
+    The command filter's limits hold per update, so a loop that runs late ``k`` periods a cycle
+    on average stretches a stop's profile, its time and its travel, by ``k``. Each update's
+    sample is its elapsed time in periods, held to at most :data:`MAKE_UP_LONGEST_GAP`: a longer
+    stall is a held command, bounded by what the arm does meanwhile (its command timeout), not a
+    slower loop.
+
+    Args:
+        dt: the control period [s].
+    """
+
+    def __init__(self, dt: float):
+        self.dt = dt
+        self._longest = max(MAKE_UP_LONGEST_GAP, dt) / dt
+        #: The estimate [periods], >= 1.
+        self.periods = 1.0
+
+    def update(self, elapsed: float | None) -> None:
+        """One update, ``elapsed`` [s] after the last (None: one period)."""
+        sample = 1.0 if elapsed is None else min(max(elapsed / self.dt, 1.0), self._longest)
+        weight = DRIVE_TIME_RISE if sample > self.periods else DRIVE_TIME_FALL
+        self.periods += weight * (sample - self.periods)

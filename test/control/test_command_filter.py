@@ -262,3 +262,27 @@ def test_a_late_cycle_does_not_take_a_ramp_for_a_faster_one(seed, late_fraction,
         time += DT * (late_periods if rng.random() < late_fraction else 1)
     assert_within(commands, limits)
     assert max(lead) <= 1e-9, max(lead)  # [s of the ramp]
+
+
+@settings(max_examples=50)
+@given(st.lists(st.floats(0.0, 2.0), min_size=1, max_size=300), st.sampled_from([1e-3, 4e-3]))
+def test_the_stretch_is_the_drive_time_of_a_late_loop_in_periods(elapsed, dt):
+    """The stretch the dampers multiply a stop's travel by: how many periods the commands have
+    recently driven the arm for. It stays within 1 and the longest sample counted (a stall's is
+    held to 30 ms: a held command, not a slower loop), is 1 on time, and a loop steadily k
+    periods late reaches k."""
+    model = irb120()
+    command_filter = CommandFilter(JointLimits.of(model), model.lower, model.upper, dt)
+    zeros = [0.0] * model.dof
+    for seconds in elapsed:
+        command_filter.update(zeros, None, seconds)
+        counted = [min(max(s / dt, 1.0), 0.03 / dt) for s in elapsed]
+        assert 1.0 - 1e-12 <= command_filter.state.stretch <= max(counted) + 1e-12
+    on_time = CommandFilter(JointLimits.of(model), model.lower, model.upper, dt)
+    for _ in range(100):
+        on_time.update(zeros, None, dt if _ else None)
+    assert on_time.state.stretch == 1.0
+    steady = min(max(elapsed[0] / dt, 1.0), 0.03 / dt)
+    for _ in range(2000):  # from as far as 30 periods, falling 1 % of the way an update
+        command_filter.update(zeros, None, steady * dt)
+    assert command_filter.state.stretch == pytest.approx(steady, rel=1e-3)

@@ -264,17 +264,26 @@ def test_config_errors_say_what_is_valid(ball_arm):
         QpController(model, replace(QpConfig(), max_acceleration=-1.0))
 
 
-def _through_the_filter(law, model, soft, q0, goal, steps: int, braking: bool, dt: float = 0.004):
-    """The QP's rates through a CommandFilter with the ``soft`` limits, integrated: the positions."""
+def _through_the_filter(law, model, soft, q0, goal, steps: int, braking, dt: float = 0.004, late=None):
+    """The QP's rates through a CommandFilter with the ``soft`` limits, integrated: the positions.
+
+    ``braking``: the law is given the filter's command (True), that command without its stretch
+    (``"unstretched"``) or nothing (False). ``late``: each update's elapsed time, in periods (the
+    arm drives each command that long); None: on time."""
     from manip_kin.control.command_filter import CommandFilter
 
     command_filter = CommandFilter(soft, model.lower, model.upper, dt)
-    q, path = np.array(q0, dtype=float), []
-    for _ in range(steps):
-        output = law.step(q, goal, dt=dt, command=command_filter.state if braking else None)
+    q, path, elapsed = np.array(q0, dtype=float), [], None
+    for step in range(steps):
+        command = command_filter.state if braking else None
+        if braking == "unstretched":
+            command = replace(command, stretch=1.0)
+        output = law.step(q, goal, dt=dt, command=command)
         # The status names the nearest pair within the influence distance only (docs/interfaces.md).
         assert output.nearest_distance < law.config.influence_distance or math.isinf(output.nearest_distance)
-        q = q + np.array(command_filter.update(output.qdot, q)) * dt
+        drive = dt if late is None else dt * late[step]
+        q = q + np.array(command_filter.update(output.qdot, q, elapsed)) * drive
+        elapsed = drive
         path.append(q)
     return path
 
@@ -309,6 +318,40 @@ def test_with_the_filters_braking_counted_soft_joint_limits_keep_the_safety_dist
         )
     assert nearest[True] >= 0.02 - 1e-3, nearest
     assert nearest[False] < 0.02 - 5e-3, nearest  # the same run without: into the safety distance
+
+
+@pytest.mark.parametrize("acceleration", [1.0, 0.3])
+def test_a_loop_that_runs_late_keeps_the_safety_distance_with_soft_joint_limits(ball_arm, acceleration):
+    """A loop that runs late (updates 1-6 periods apart, 2.3 on average) stretches the filter's
+    stop, whose limits hold per update; the dampers count the stretch the filter measures, and
+    the ball stops at the safety distance. Without the stretch counted it went into the safety
+    distance. The distances are closed forms of the ball's spheres against the box."""
+    from collision_robots import ball_centres, point_box_distance
+
+    from manip_kin.control.joint_limits import JointLimit, JointLimits
+
+    model, collision = ball_arm
+    start_q, goal_q = np.array([-0.6, 0.4, 0.8]), np.array([0.6, 0.4, 0.8])
+    start, goal = frame_pose(model, start_q), frame_pose(model, goal_q)
+    centre, extents = 0.5 * (start[:3, 3] + goal[:3, 3]), (0.08, 0.08, 0.08)
+    scene = Scene()
+    scene.add(make_obstacle(("cell", 1), "box", extents, make_transform(None, centre)))
+    soft = JointLimits.of(
+        model, {n: JointLimit(True, 2.0, True, acceleration, False, 1.0, True, 50.0) for n in model.joint_names}
+    )
+    late = np.random.default_rng(26).choice([1, 2, 3, 6], size=1500, p=[0.4, 0.3, 0.2, 0.1])
+    nearest = {}
+    for braking in ("unstretched", True):
+        checker = CollisionChecker(model, collision)
+        checker.update_scene(scene)
+        config = QpConfig(controller=POSITION_TASK, braking=soft)
+        law = QpController(model, config, checker)
+        path = _through_the_filter(law, model, soft, start_q, goal, 1500, braking, late=late)
+        nearest[braking] = min(
+            point_box_distance(c, centre, extents) - r for q in path for _, c, r in ball_centres(model, q)
+        )
+    assert nearest[True] >= 0.02 - 1e-3, nearest
+    assert nearest["unstretched"] < 0.02 - 5e-3, nearest
 
 
 @given(

@@ -188,7 +188,9 @@ class CollisionLimit:
         d_i, d_s = self.influence_distance, self.safety_distance
         if self.braking is None or command is None or not (command.velocity.any() or command.acceleration.any()):
             return self.checker.evaluate(q, d_i, d_s, self.gain)
-        travel = self.braking.stopping_travel(command.velocity, command.acceleration)
+        # A loop that runs late drives each of the stop's commands for longer: the filter's limits
+        # hold per update, so the stop's travel stretches by as much.
+        travel = command.stretch * self.braking.stopping_travel(command.velocity, command.acceleration)
         reach = float(np.abs(travel) @ self.checker.reach_most)  # the most any pair closes meanwhile
         # Whole bands: a cutoff that stays the same from cycle to cycle keeps the broad phase's
         # near rows (a new cutoff is a full pass).
