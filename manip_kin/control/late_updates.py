@@ -105,7 +105,7 @@ class LateUpdateMakeUp:
 
 
 #: How far the drive-time estimate moves towards an update's sample: quickly towards a longer
-#: one, slowly back, so that a loading that comes and goes keeps it near its worst [per update].
+#: one, slowly back, so that a load that comes and goes keeps it near its worst [per update].
 DRIVE_TIME_RISE = 0.1
 DRIVE_TIME_FALL = 0.01
 

@@ -288,12 +288,11 @@ def _through_the_filter(law, model, soft, q0, goal, steps: int, braking, dt: flo
     return path
 
 
-@pytest.mark.parametrize("acceleration", [1.0, 0.3])
-def test_with_the_filters_braking_counted_soft_joint_limits_keep_the_safety_distance(ball_arm, acceleration):
-    """A command filter that stops slowly (1 and 0.3 rad/s², stops of 2 and 6.7 s from full
-    speed) takes the ball into the box when the dampers assume the rates are applied at once;
-    with its braking counted the ball stops at the safety distance. The distances are closed
-    forms of the ball's spheres against the box."""
+def _nearest_through_the_filter(ball_arm, acceleration: float, variants, late=None) -> dict:
+    """The ball arm driven from START to GOAL through the box between them, the QP's rates through
+    a CommandFilter with ``acceleration`` [rad/s²] on every joint: for each of ``variants`` (as
+    ``_through_the_filter``'s ``braking``), the nearest approach of its spheres to the box [m],
+    in closed form."""
     from collision_robots import ball_centres, point_box_distance
 
     from manip_kin.control.joint_limits import JointLimit, JointLimits
@@ -308,14 +307,23 @@ def test_with_the_filters_braking_counted_soft_joint_limits_keep_the_safety_dist
         model, {n: JointLimit(True, 2.0, True, acceleration, False, 1.0, True, 50.0) for n in model.joint_names}
     )
     nearest = {}
-    for braking in (False, True):
+    for braking in variants:
         checker = CollisionChecker(model, collision)
         checker.update_scene(scene)
-        config = QpConfig(controller=POSITION_TASK, braking=soft)
-        path = _through_the_filter(QpController(model, config, checker), model, soft, start_q, goal, 1500, braking)
+        law = QpController(model, QpConfig(controller=POSITION_TASK, braking=soft), checker)
+        path = _through_the_filter(law, model, soft, start_q, goal, 1500, braking, late=late)
         nearest[braking] = min(
             point_box_distance(c, centre, extents) - r for q in path for _, c, r in ball_centres(model, q)
         )
+    return nearest
+
+
+@pytest.mark.parametrize("acceleration", [1.0, 0.3])
+def test_with_the_filters_braking_counted_soft_joint_limits_keep_the_safety_distance(ball_arm, acceleration):
+    """A command filter that stops slowly (1 and 0.3 rad/s², stops of 2 and 6.7 s from full
+    speed) takes the ball into the box when the dampers assume the rates are applied at once;
+    with its braking counted the ball stops at the safety distance."""
+    nearest = _nearest_through_the_filter(ball_arm, acceleration, (False, True))
     assert nearest[True] >= 0.02 - 1e-3, nearest
     assert nearest[False] < 0.02 - 5e-3, nearest  # the same run without: into the safety distance
 
@@ -325,31 +333,9 @@ def test_a_loop_that_runs_late_keeps_the_safety_distance_with_soft_joint_limits(
     """A loop that runs late (updates 1-6 periods apart, 2.3 on average) stretches the filter's
     stop, whose limits hold per update; the dampers count the stretch the filter measures, and
     the ball stops at the safety distance. Without the stretch counted it went into the safety
-    distance. The distances are closed forms of the ball's spheres against the box."""
-    from collision_robots import ball_centres, point_box_distance
-
-    from manip_kin.control.joint_limits import JointLimit, JointLimits
-
-    model, collision = ball_arm
-    start_q, goal_q = np.array([-0.6, 0.4, 0.8]), np.array([0.6, 0.4, 0.8])
-    start, goal = frame_pose(model, start_q), frame_pose(model, goal_q)
-    centre, extents = 0.5 * (start[:3, 3] + goal[:3, 3]), (0.08, 0.08, 0.08)
-    scene = Scene()
-    scene.add(make_obstacle(("cell", 1), "box", extents, make_transform(None, centre)))
-    soft = JointLimits.of(
-        model, {n: JointLimit(True, 2.0, True, acceleration, False, 1.0, True, 50.0) for n in model.joint_names}
-    )
+    distance."""
     late = np.random.default_rng(26).choice([1, 2, 3, 6], size=1500, p=[0.4, 0.3, 0.2, 0.1])
-    nearest = {}
-    for braking in ("unstretched", True):
-        checker = CollisionChecker(model, collision)
-        checker.update_scene(scene)
-        config = QpConfig(controller=POSITION_TASK, braking=soft)
-        law = QpController(model, config, checker)
-        path = _through_the_filter(law, model, soft, start_q, goal, 1500, braking, late=late)
-        nearest[braking] = min(
-            point_box_distance(c, centre, extents) - r for q in path for _, c, r in ball_centres(model, q)
-        )
+    nearest = _nearest_through_the_filter(ball_arm, acceleration, ("unstretched", True), late)
     assert nearest[True] >= 0.02 - 1e-3, nearest
     assert nearest["unstretched"] < 0.02 - 5e-3, nearest
 
