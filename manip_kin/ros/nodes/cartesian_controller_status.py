@@ -47,6 +47,7 @@ def status_values(node) -> list[tuple[str, str]]:
             ("rejected_servo_commands", str(node.servo.rejected)),
             ("command_filter", node.command_filter.result),
             ("braking_joints", ",".join(node.model.joint_names[i] for i in node.command_filter.braking_joints)),
+            ("command_drive_periods", f"{node.command_filter.drive_time.periods:.3f}"),
             ("unreachable_errors", " ".join(f"{v:.6g}" for v in supervisor.unreachable_errors or ())),
             ("loop_error", node.loop_error()),
             *node.collision.report(node.get_clock().now().to_msg(), node.joint_output if joint_space else node.output),

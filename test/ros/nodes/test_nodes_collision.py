@@ -125,6 +125,8 @@ def test_obstacle_on_the_path_is_kept_at_the_safety_distance_and_a_goal_beside_i
         assert float(values["position_error"]) == pytest.approx(held_off, abs=2e-3)  # where it was held off
         assert values["nearest_pair"].endswith("obstacle:cell/1")
         assert float(values["nearest_distance"]) == pytest.approx(SAFETY, abs=5e-3)
+        # On a 250 Hz loop: at least one period, and at most the 30 ms a sample is held to.
+        assert 1.0 <= float(values["command_drive_periods"]) <= 0.03 * 250
         assert harness.spin_until(lambda: node.command_filter.at_rest, 3)  # blocked: at rest
         ours = [m for msg in markers for m in msg.markers if m.ns == MARKER_NS and m.action == Marker.ADD]
         assert ours and ours[-1].type == Marker.LINE_LIST and len(ours[-1].points) == 2
