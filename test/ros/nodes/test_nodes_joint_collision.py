@@ -12,6 +12,7 @@ from held_arm import start_held_arm
 from node_harness import Harness
 from sensor_msgs.msg import JointState
 from test_nodes_collision import (
+    ARM_COMMAND_TIMEOUT,
     GOAL_Q,
     SAFETY,
     START_Q,
@@ -56,6 +57,10 @@ def _start_with_pillar(harness, ball_urdf, **params):
         harness,
         ball_urdf,
         START_Q,
+        # Below the damper's hold time, as test_nodes_collision.py's arm. With commands held
+        # forever a full run once took the ball to 13.6 mm: what a stall longer than the hold
+        # time does (test_a_stall_within_the_arms_command_timeout_keeps_the_safety_distance).
+        arm_command_timeout=ARM_COMMAND_TIMEOUT,
         collision_avoidance=True,
         collision_safety_distance=SAFETY,
         collision_pair_samples=100,
