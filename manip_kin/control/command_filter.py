@@ -156,7 +156,7 @@ class CommandFilter:
 
     @property
     def state(self) -> FilterState:
-        """The last command and its acceleration."""
+        """The last command, its acceleration and the stretch of a late loop."""
         return FilterState(np.array(self._velocity), np.array(self._acceleration), self.drive_time.periods)
 
     @property
