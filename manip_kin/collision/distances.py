@@ -15,8 +15,8 @@ shapes rebuilt only when ``scene.version`` moves). Each cycle
 3. the narrow phase (:mod:`~manip_kin.collision.narrow_phase`: coal, from C++ where that can be
    built, else through its Python bindings) computes the distance ``d`` and witness points
    ``p_a``, ``p_b`` of the others (convex shapes: about 1 µs a pair from C++; negative ``d`` is
-   the penetration depth). The native one runs steps 2 to 4 in one call (``mk_narrow_near``);
-   the Python code here is their reference;
+   the penetration depth). The native one runs steps 1 (but the generated function) to 4 in
+   one call (``mk_narrow_near``); the Python code here is their reference;
 4. each pair with ``d < d_i`` becomes a velocity-damper row (Faverjon and Tournassoud)::
 
        n·(J_a(p_a) - J_b(p_b)) q̇  <=  ξ (d - d_s) / (d_i - d_s)
@@ -25,6 +25,8 @@ shapes rebuilt only when ``scene.version`` moves). Each cycle
    witness point on its link (zero on an obstacle), ``d_s`` the safety distance and ``ξ``
    the gain [m/s]: the closing speed ``-ḋ`` may not exceed ``ξ`` at ``d_i`` and falls to
    zero at ``d_s``, so ``d`` approaches ``d_s`` at most exponentially and never crosses it.
+   With a stopping ``travel`` per joint, ``d`` is first lessened by what the pair closes over
+   it (see :meth:`CollisionChecker.evaluate`).
 
 Shapes fixed on the base are not paired with obstacles: no joint can move them apart.
 """
@@ -38,7 +40,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
-from manip_kin.collision.geometry import CollisionShape, frames_and_twists, joint_reach, obstacle_shape, sphere_centres
+from manip_kin.collision.geometry import (
+    CollisionShape,
+    frame_values,
+    frames_and_twists,
+    joint_reach,
+    obstacle_shape,
+    sphere_centres,
+)
 from manip_kin.collision.narrow_phase import ROW_WIDTH, NativeNarrowPhase, PythonNarrowPhase, make_narrow_phase
 from manip_kin.core.model import RobotModel
 from manip_kin.core.scene import Scene
@@ -141,6 +150,8 @@ class CollisionChecker:
         #: why it is not the native one ("" when it is).
         self._robot_shapes = [g.shape for g in geometries]
         self.narrow_phase, self.narrow_phase_problem = make_narrow_phase(self._robot_shapes, native)
+        if isinstance(self.narrow_phase, NativeNarrowPhase):
+            self.narrow_phase.set_placement(model.dof + 1, collision_model.frames, self._offsets_and_centres)
         self._scene_version: int | None = None
         #: Why obstacles of the last scene taken were left out (empty: all were taken).
         self.scene_problems: tuple[str, ...] = ()
@@ -262,25 +273,27 @@ class CollisionChecker:
         return np.matmul(frames[self.collision_model.frames, :3], self._offsets_and_centres)
 
     def _near_pairs(
-        self, q: np.ndarray, cutoff: float, dampers: bool = False
-    ) -> tuple[list[int], np.ndarray, np.ndarray | None]:
+        self, q: np.ndarray, cutoff: float, damper: tuple[float, float, float] | None = None, travel=None
+    ) -> tuple[list[int], np.ndarray, np.ndarray | None, np.ndarray | None]:
         """The pair rows nearer than ``cutoff``, their narrow-phase columns (distance, witness
         points, normal, damper features: :mod:`~manip_kin.collision.narrow_phase`), shape
-        (k, 22), and with ``dampers`` their damper rows (:meth:`_damper_matrix`), else None;
-        updates the lower bounds (see :meth:`pair_distances`). The native narrow phase does all
-        of it in C++ (``mk_narrow_near``); this is the reference it is held to.
+        (k, 22), and with ``damper`` (``(d_i, d_s, ξ)``) their damper rows (:meth:`_damper_matrix`)
+        and bounds, else None and None; with ``travel`` too, only the pairs whose distance less
+        what they close over it is within ``d_i`` (:meth:`evaluate`). Updates the lower bounds
+        (see :meth:`pair_distances`). The native narrow phase does all of it in C++
+        (``mk_narrow_near``); this is the reference it is held to.
 
         Since the last call each shape moved by at most ``Σ_j |Δq_j| · reach[j]``
         (:func:`~manip_kin.collision.geometry.joint_reach`, whatever the path between the two
         configurations), so a pair's distance fell by at most its two shapes' bounds: the lower
         bound carried from the last call less those stays one.
         """
-        placed = self._place(q)
         if self._native_broad:
-            rows, columns, matrix, self.pairs_computed = self.narrow_phase.near_pairs(
-                q, placed, cutoff, self._twists if dampers else None
+            rows, columns, matrix, bound, self.pairs_computed = self.narrow_phase.near_pairs(
+                q, frame_values(self.model, q), cutoff, damper, travel
             )
-            return rows, columns, matrix
+            return rows, columns, matrix, bound
+        placed = self._place(q)
         q_values = q.tolist()
         if self._previous is not None:
             step = [abs(a - b) for a, b in zip(q_values, self._previous)]
@@ -304,7 +317,7 @@ class CollisionChecker:
             self._near_cutoff, self._budget = cutoff, BAND
         self.pairs_computed = len(rows)
         if not rows:
-            return [], _NO_COLUMNS, None
+            return [], _NO_COLUMNS, None, None
         columns = self.narrow_phase.compute(placed, rows, cutoff)
         distances = columns[:, 0]
         lower[rows] = distances
@@ -316,7 +329,17 @@ class CollisionChecker:
         found = (distances < cutoff).tolist()
         if not all(found):
             rows, columns = [row for row, keep in zip(rows, found) if keep], columns[found]
-        return rows, columns, self._damper_matrix(rows, columns) if dampers and rows else None
+        if damper is None or not rows:
+            return rows, columns, None, None
+        influence, safety, gain = damper
+        matrix = self._damper_matrix(rows, columns)
+        left = columns[:, 0]
+        if travel is not None:
+            left = left - np.maximum(matrix @ travel, 0.0)
+            keep = left < influence
+            rows = [row for row, kept in zip(rows, keep.tolist()) if kept]
+            columns, matrix, left = columns[keep], matrix[keep], left[keep]
+        return rows, columns, matrix, gain * (left - safety) / (influence - safety)
 
     def _pair(self, row: int, columns: np.ndarray) -> PairDistance:
         """The :class:`PairDistance` of pair ``row`` from its narrow-phase columns."""
@@ -339,7 +362,7 @@ class CollisionChecker:
         Between nearby configurations (a control loop, a sampled path) most far pairs are
         therefore computed once and skipped afterwards.
         """
-        rows, columns, _ = self._near_pairs(q, cutoff)
+        rows, columns, _, _ = self._near_pairs(q, cutoff)
         return [self._pair(row, line) for row, line in zip(rows, columns)]
 
     def link_distances(self, q: np.ndarray) -> list[PairDistance]:
@@ -352,7 +375,14 @@ class CollisionChecker:
                 nearest[pair.pair] = pair
         return sorted(nearest.values(), key=lambda pair: pair.distance)
 
-    def evaluate(self, q: np.ndarray, influence_distance: float, safety_distance: float, gain: float) -> DamperRows:
+    def evaluate(
+        self,
+        q: np.ndarray,
+        influence_distance: float,
+        safety_distance: float,
+        gain: float,
+        travel: np.ndarray | None = None,
+    ) -> DamperRows:
         """The velocity-damper rows of the pairs within ``influence_distance`` (see the module docstring).
 
         Args:
@@ -360,12 +390,23 @@ class CollisionChecker:
             influence_distance: ``d_i`` [m], > ``safety_distance``.
             safety_distance: ``d_s`` [m], >= 0.
             gain: ``ξ`` [m/s], > 0: the closing speed allowed at ``d_i``.
+            travel: each joint's travel until the command comes to rest, signed, shape (n,)
+                [rad | m], or None. Each pair's ``d`` is then first lessened by what it closes
+                over it, ``max(0, n·(J_a − J_b) travel)``, in its row's bound and in the choice of
+                the rows (those left within ``d_i``), and the pairs within ``d_i`` plus the most
+                any shape can move over it are looked at (:class:`~manip_kin.control.qp.limits.CollisionLimit`).
+                :attr:`DamperRows.distances` and the nearest pair stay the distances themselves.
         """
-        rows, columns, matrix = self._near_pairs(q, influence_distance, dampers=True)
+        cutoff = influence_distance
+        if travel is not None:
+            reach = float(np.abs(travel) @ self._reach_most_array)  # the most any pair closes over it
+            # Whole bands: a cutoff that stays the same from cycle to cycle keeps the broad
+            # phase's near rows (a new cutoff is a full pass).
+            cutoff += BAND * math.ceil(reach / BAND)
+        rows, columns, matrix, bound = self._near_pairs(q, cutoff, (influence_distance, safety_distance, gain), travel)
         if not rows:
             return DamperRows((), np.zeros(0), np.zeros((0, self.model.dof)), np.zeros(0), None)
         distances = columns[:, 0].copy()
-        bound = gain * (distances - safety_distance) / (influence_distance - safety_distance)
         labels = self._labels
         nearest = int(np.argmin(distances))
         return DamperRows(
@@ -373,7 +414,8 @@ class CollisionChecker:
             distances,
             matrix,
             bound,
-            self._pair(rows[nearest], columns[nearest]),
+            # Reported within d_i only, as the status documents (a row kept for its travel may be beyond).
+            self._pair(rows[nearest], columns[nearest]) if distances[nearest] < influence_distance else None,
         )
 
     def _damper_matrix(self, rows: list[int], columns: np.ndarray) -> np.ndarray:

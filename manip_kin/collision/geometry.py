@@ -241,18 +241,25 @@ def model_frames(model: RobotModel, q: np.ndarray) -> np.ndarray:
     return frames_and_twists(model, q)[0]
 
 
+def frame_values(model: RobotModel, q: np.ndarray) -> tuple[float, ...]:
+    """Frames 0 (base) .. n in base (16 values each, row-major 4x4), then the joints' unit twists
+    ``[ω; v]`` in base (6 x n, row-major), at ``q`` (n,), flat: the generated function's own
+    output (see :func:`~manip_kin.codegen.chain.generate_frames_source`), which the native
+    narrow phase takes as it is."""
+    from manip_kin.core.kinematics import compiled_frames
+
+    return compiled_frames(model)(q.tolist())
+
+
 def frames_and_twists(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Frames 0 (base) .. n in base, shape (n + 1, 4, 4), and the joints' unit twists
-    ``[ω; v]`` in base, shape (6, n), at ``q`` (n,) (see
-    :func:`~manip_kin.codegen.chain.generate_frames_source`).
+    ``[ω; v]`` in base, shape (6, n), at ``q`` (n,) (:func:`frame_values`).
 
     One generated function for all of them: a numpy chain of 4x4 products costs its call
     overhead per frame.
     """
-    from manip_kin.core.kinematics import compiled_frames
-
     n = model.dof
-    values = compiled_frames(model)(q.tolist())
+    values = frame_values(model, q)
     # fromiter with a count: np.array infers the type of each of the ~170 floats (4x the time).
     values = np.fromiter(values, float, len(values))
     return values[: 16 * (n + 1)].reshape(n + 1, 4, 4), values[16 * (n + 1) :].reshape(6, n)

@@ -1,9 +1,10 @@
 // The collision narrow phase in C++: coal's distance and witness points of the pairs a control
 // cycle asks for, and each pair's damper features, in one call (manip_kin/collision/narrow_phase.py
 // builds this with the system's C++ compiler and calls it through ctypes; its Python loop is the
-// fallback and the reference the tests hold this to). mk_narrow_near runs the broad phase of
-// manip_kin/collision/distances.py (CollisionChecker._near_pairs, the reference) before it and
-// the damper rows after it, on arrays that Python derives once per scene.
+// fallback and the reference the tests hold this to). mk_narrow_near places the robot's shapes on
+// the model's frames and runs the broad phase of manip_kin/collision/distances.py
+// (CollisionChecker._near_pairs, the reference) before it and the damper rows after it, on arrays
+// that Python derives once per robot (mk_narrow_set_placement) and once per scene.
 //
 // Shapes are built as manip_kin/collision/geometry.py builds them: box (full extents), sphere,
 // cylinder (radius, length along z), and a mesh file as its convex hull (coal's MeshLoader,
@@ -51,6 +52,16 @@ struct BroadPhase {
   std::vector<double> lines;   // scratch: their columns
 };
 
+// Where the robot's shapes sit (set once per robot): each shape's model frame and its pose in
+// that frame with its bounding-sphere centre as a fifth column, row-major 4 x 5.
+struct Placement {
+  bool set = false;
+  int frame_count = 0;
+  std::vector<int> shape_frames;
+  std::vector<double> offsets;
+  std::vector<double> placed;  // scratch: the shapes' [R | t | c] in base, robot_count x 3 x 5
+};
+
 struct NarrowPhase {
   std::vector<coal::CollisionGeometryPtr_t> shapes;  // robot shapes, then obstacles
   std::vector<coal::Transform3s> transforms;         // obstacles' stay as set; robot's set per call
@@ -62,6 +73,7 @@ struct NarrowPhase {
   std::vector<char> placed;  // per robot shape: placed in this call yet
   std::map<std::string, coal::CollisionGeometryPtr_t> meshes;  // obstacle meshes by file and scale
   BroadPhase broad;
+  Placement placement;
 };
 
 coal::CollisionGeometryPtr_t make_shape(int kind, const double* size, const char* path) {
@@ -91,6 +103,23 @@ void write_features(const coal::Vec3s& p, const coal::Vec3s& n, double* out) {
   out[3] = n[0];
   out[4] = n[1];
   out[5] = n[2];
+}
+
+// placement.placed = frames[shape_frames] (the top 3 rows of each 4x4) times offsets, as
+// CollisionChecker._place computes it.
+void place_shapes(NarrowPhase* phase, const double* frames) {
+  Placement& placement = phase->placement;
+  for (int g = 0; g < phase->robot_count; ++g) {
+    const double* frame = frames + 16 * placement.shape_frames[g];
+    const double* offset = placement.offsets.data() + 20 * g;
+    double* out = placement.placed.data() + 15 * g;
+    for (int i = 0; i < 3; ++i)
+      for (int c = 0; c < 5; ++c) {
+        double sum = 0.0;
+        for (int k = 0; k < 4; ++k) sum += frame[4 * i + k] * offset[5 * k + c];
+        out[5 * i + c] = sum;
+      }
+  }
 }
 
 void compute_rows(NarrowPhase* phase, const double* placed, const int* rows, int row_count, double* out) {
@@ -243,6 +272,30 @@ int mk_narrow_set_scene(void* handle, int obstacle_count, const int* kinds, cons
 
 void mk_narrow_destroy(void* handle) { delete static_cast<NarrowPhase*>(handle); }
 
+// Where the robot shapes sit: the model's frame_count frames (base first), each shape's frame
+// index and its pose in that frame with its bounding-sphere centre as a fifth column (row-major
+// robot_count x 4 x 5). Returns 0, or -1 (see mk_narrow_error).
+int mk_narrow_set_placement(void* handle, int frame_count, const int* shape_frames, const double* offsets) {
+  auto* phase = static_cast<NarrowPhase*>(handle);
+  try {
+    Placement placement;
+    placement.frame_count = frame_count;
+    placement.shape_frames.assign(shape_frames, shape_frames + phase->robot_count);
+    for (int frame : placement.shape_frames)
+      if (frame < 0 || frame >= frame_count)
+        throw std::runtime_error("shape frame " + std::to_string(frame) + " not one of " +
+                                 std::to_string(frame_count));
+    placement.offsets.assign(offsets, offsets + 20 * phase->robot_count);
+    placement.placed.assign(15 * phase->robot_count, 0.0);
+    placement.set = true;
+    phase->placement = std::move(placement);
+    return 0;
+  } catch (const std::exception& error) {
+    last_error = error.what();
+    return -1;
+  }
+}
+
 // placed: the robot shapes' [R | t | c] in base, row-major (robot_count, 3, 5); rows: row_count pair
 // indices; out: row_count x kRowWidth. Returns 0, or -1 (see mk_narrow_error).
 int mk_narrow_compute(void* handle, const double* placed, const int* rows, int row_count, double* out) {
@@ -289,23 +342,32 @@ int mk_narrow_set_broad(void* handle, int dof, double band, const double* radius
   }
 }
 
-// One cycle of CollisionChecker._near_pairs: the broad phase at q (dof values) with the robot
-// shapes placed as in mk_narrow_compute, the narrow phase of the pairs it keeps, and of those
-// nearer than cutoff: their rows (out_rows), columns (out_columns, kRowWidth each) and, when
-// twists (the joints' [w; v], row-major 6 x dof) is not null, damper rows (out_matrix, dof each).
-// counts: [pairs nearer than cutoff, pairs computed]. Returns 0, or -1 (see mk_narrow_error).
-int mk_narrow_near(void* handle, const double* q, const double* placed, double cutoff, const double* twists,
-                   int* out_rows, double* out_columns, double* out_matrix, int* counts) {
+// One cycle of CollisionChecker._near_pairs: the robot shapes placed on frames (the model's
+// frame_count 4x4 frames in base, row-major, then the joints' twists [w; v], row-major 6 x dof,
+// as the generated frames function gives them), the broad phase at q (dof values), the narrow
+// phase of the pairs it keeps, and of those nearer than cutoff: their rows (out_rows) and
+// columns (out_columns, kRowWidth each). With damper ([d_i, d_s, gain]) also their damper rows
+// (out_matrix, dof each) and bounds (out_bound); with travel (dof values, each joint's stopping
+// travel) each distance is first lessened by what the pair closes over it, and only the pairs
+// left within d_i are kept. counts: [pairs kept, pairs computed]. Returns 0, or -1 (see
+// mk_narrow_error).
+int mk_narrow_near(void* handle, const double* q, const double* frames, double cutoff, const double* damper,
+                   const double* travel, int* out_rows, double* out_columns, double* out_matrix, double* out_bound,
+                   int* counts) {
   auto* phase = static_cast<NarrowPhase*>(handle);
   try {
     BroadPhase& broad = phase->broad;
     if (!broad.set) throw std::runtime_error("no broad phase for this scene (mk_narrow_set_broad)");
+    if (!phase->placement.set) throw std::runtime_error("no placement for the robot's shapes (mk_narrow_set_placement)");
+    place_shapes(phase, frames);
+    const double* placed = phase->placement.placed.data();
     select_rows(phase, q, placed, cutoff);
     const int asked = static_cast<int>(broad.rows.size());
     compute_rows(phase, placed, broad.rows.data(), asked, broad.lines.data());
     broad.near_rows.clear();
     int found = 0;
     const int dof = broad.dof;
+    const double* twists = frames + 16 * phase->placement.frame_count;
     for (int r = 0; r < asked; ++r) {
       const int row = broad.rows[r];
       const double* line = broad.lines.data() + kRowWidth * r;
@@ -314,12 +376,11 @@ int mk_narrow_near(void* handle, const double* q, const double* placed, double c
       // Found at cutoff + what is left of the band or beyond: it cannot come within cutoff first.
       if (distance < cutoff + broad.budget) broad.near_rows.push_back(row);
       if (!(distance < cutoff)) continue;
-      out_rows[found] = row;
-      std::copy(line, line + kRowWidth, out_columns + kRowWidth * found);
-      if (twists != nullptr) {
+      if (damper != nullptr) {
         const double* moves_first = broad.moves_first.data() + row * dof;
         const double* moves_second = broad.moves_second.data() + row * dof;
         double* matrix_row = out_matrix + dof * found;
+        double closing = 0.0;
         for (int j = 0; j < dof; ++j) {
           double first = 0.0, second = 0.0;
           for (int i = 0; i < 6; ++i) {
@@ -327,8 +388,14 @@ int mk_narrow_near(void* handle, const double* q, const double* placed, double c
             second += line[16 + i] * twists[i * dof + j];
           }
           matrix_row[j] = first * moves_first[j] - second * moves_second[j];
+          if (travel != nullptr) closing += matrix_row[j] * travel[j];
         }
+        const double left = distance - std::max(closing, 0.0);
+        if (travel != nullptr && !(left < damper[0])) continue;
+        out_bound[found] = damper[2] * (left - damper[1]) / (damper[0] - damper[1]);
       }
+      out_rows[found] = row;
+      std::copy(line, line + kRowWidth, out_columns + kRowWidth * found);
       ++found;
     }
     counts[0] = found;

@@ -11,7 +11,8 @@ unit normal ``n`` from ``a`` to ``b``; and the damper features ``[p_a × n, n]``
   :mod:`manip_kin.codegen.native` and called once per cycle through ctypes. It builds its
   own shapes from the same descriptions as :mod:`manip_kin.collision.geometry` (a mesh as
   its convex hull, loaded and hulled by the same coal calls). :meth:`NativeNarrowPhase.near_pairs`
-  also runs the checker's broad phase before and its damper rows after, in the same call.
+  also places the robot's shapes on the model's frames and runs the checker's broad phase before
+  and its damper rows (with the braking's lessening) after, in the same call.
 * :class:`PythonNarrowPhase`: the same through coal's Python bindings, a few calls per pair.
   It is the fallback where the native one cannot be built (no compiler, no Eigen headers,
   ``MANIP_KIN_NATIVE=0``) and the reference the tests hold the native one to.
@@ -176,8 +177,10 @@ def _library() -> ctypes.CDLL:
     library.mk_narrow_compute.argtypes = [pointer, pointer, pointer, ctypes.c_int, pointer]
     library.mk_narrow_set_broad.restype = ctypes.c_int
     library.mk_narrow_set_broad.argtypes = [pointer, ctypes.c_int, ctypes.c_double, *[pointer] * 6]
+    library.mk_narrow_set_placement.restype = ctypes.c_int
+    library.mk_narrow_set_placement.argtypes = [pointer, ctypes.c_int, pointer, pointer]
     library.mk_narrow_near.restype = ctypes.c_int
-    library.mk_narrow_near.argtypes = [pointer, pointer, pointer, ctypes.c_double, *[pointer] * 5]
+    library.mk_narrow_near.argtypes = [pointer, pointer, pointer, ctypes.c_double, *[pointer] * 7]
     if library.mk_narrow_row_width() != ROW_WIDTH:
         raise NativeUnavailable(f"narrow_phase.cpp writes {library.mk_narrow_row_width()} columns, not {ROW_WIDTH}")
     return library
@@ -262,6 +265,18 @@ class NativeNarrowPhase:
         self._out = np.zeros((max(len(pair_array), 1), ROW_WIDTH))
         self._rows_address, self._out_address = self._rows.ctypes.data, self._out.ctypes.data
 
+    def set_placement(self, frame_count: int, shape_frames: np.ndarray, offsets_and_centres: np.ndarray) -> None:
+        """Where the robot's shapes sit, for :meth:`near_pairs`: the model's ``frame_count``
+        frames (base first, the layout of :func:`~manip_kin.collision.geometry.frame_values`),
+        each shape's frame index, shape (G,), and its pose in that frame with its bounding-sphere
+        centre as a fifth column, shape (G, 4, 5), as
+        :class:`~manip_kin.collision.distances.CollisionChecker` places them."""
+        frames = np.ascontiguousarray(shape_frames, dtype=np.intc).reshape(self._robot_count)
+        offsets = np.ascontiguousarray(offsets_and_centres, dtype=float).reshape(self._robot_count, 4, 5)
+        if self._library.mk_narrow_set_placement(self._handle, frame_count, frames.ctypes.data, offsets.ctypes.data):
+            raise RuntimeError(f"narrow phase: {_last_error(self._library)}")
+        self._frame_count = frame_count
+
     def set_broad_phase(
         self,
         band: float,
@@ -277,7 +292,7 @@ class NativeNarrowPhase:
         ``radius_sums`` (P,) [m], ``reach_pairs`` (n, P) [m per rad | m] and its largest per joint
         ``reach_most`` (n,), ``moves_first`` and
         ``moves_second`` (P, n) of 0 and 1, ``obstacle_centres`` (m, 3) [m]; ``band`` [m]. Resets
-        the bounds :meth:`near_pairs` carries between calls."""
+        the bounds :meth:`near_pairs` carries between calls. After :meth:`set_placement`."""
         pairs, dof = np.shape(moves_first)
         arrays = [
             np.ascontiguousarray(a, dtype=float)
@@ -288,38 +303,64 @@ class NativeNarrowPhase:
         self._found_rows = np.zeros(max(pairs, 1), dtype=np.intc)
         self._found_columns = np.zeros((max(pairs, 1), ROW_WIDTH))
         self._matrix = np.zeros((max(pairs, 1), dof))
+        self._bound = np.zeros(max(pairs, 1))
         self._counts = np.zeros(2, dtype=np.intc)
         # The inputs too: copying into a buffer costs less than asking an array for its address.
-        self._q, self._placed, self._twists = np.zeros(dof), np.zeros((self._robot_count, 3, 5)), np.zeros((6, dof))
-        self._addresses = [a.ctypes.data for a in (self._q, self._placed, self._twists)]
+        self._q, self._frames = np.zeros(dof), np.zeros(16 * self._frame_count + 6 * dof)
+        self._damper, self._travel = np.zeros(3), np.zeros(dof)
+        self._addresses = [a.ctypes.data for a in (self._q, self._frames, self._damper, self._travel)]
         self._near_addresses = [
-            a.ctypes.data for a in (self._found_rows, self._found_columns, self._matrix, self._counts)
+            a.ctypes.data for a in (self._found_rows, self._found_columns, self._matrix, self._bound, self._counts)
         ]
 
     def near_pairs(
-        self, q: np.ndarray, placed: np.ndarray, cutoff: float, twists: np.ndarray | None
-    ) -> tuple[list[int], np.ndarray, np.ndarray | None, int]:
-        """The broad phase of :meth:`~manip_kin.collision.distances.CollisionChecker._near_pairs`
-        (its reference), this narrow phase and, with the joints' ``twists`` (6, n), the damper
-        rows, in one call: the pair rows nearer than ``cutoff`` [m], their columns (a view the
-        next call overwrites), their damper rows (k, n) or None, and how many pairs were computed.
+        self,
+        q: np.ndarray,
+        frames: Sequence[float],
+        cutoff: float,
+        damper: tuple[float, float, float] | None = None,
+        travel: np.ndarray | None = None,
+    ) -> tuple[list[int], np.ndarray, np.ndarray | None, np.ndarray | None, int]:
+        """The shapes placed on ``frames``, the broad phase of
+        :meth:`~manip_kin.collision.distances.CollisionChecker._near_pairs` (its reference) and
+        this narrow phase in one call: the pair rows nearer than ``cutoff`` [m], their columns
+        (a view the next call overwrites), with ``damper`` their damper rows (k, n) and bounds
+        (k,) [m/s], else None and None, and how many pairs were computed.
 
         Args:
             q: joint positions, shape (n,).
-            placed: the robot shapes' ``[R | t | c]`` in base, shape (G, 3, 5).
+            frames: the model's frames and joint twists, flat
+                (:func:`~manip_kin.collision.geometry.frame_values`).
+            damper: ``(d_i, d_s, ξ)`` [m, m, m/s].
+            travel: with ``damper``, each joint's stopping travel, shape (n,) [rad | m]: each
+                distance is lessened by what the pair closes over it, and only the pairs left
+                within ``d_i`` are kept (:meth:`~manip_kin.collision.distances.CollisionChecker.evaluate`).
         """
         self._q[:] = q
-        self._placed[...] = placed
-        q_address, placed_address, twists_address = self._addresses
-        if twists is None:
-            twists_address = None
+        self._frames[:] = frames
+        q_address, frames_address, damper_address, travel_address = self._addresses
+        if damper is None:
+            damper_address = travel_address = None
         else:
-            self._twists[...] = twists
-        if self._near(self._handle, q_address, placed_address, cutoff, twists_address, *self._near_addresses):
+            self._damper[:] = damper
+            if travel is None:
+                travel_address = None
+            else:
+                self._travel[:] = travel
+        if self._near(
+            self._handle, q_address, frames_address, cutoff, damper_address, travel_address, *self._near_addresses
+        ):
             raise RuntimeError(f"narrow phase: {_last_error(self._library)}")
         found, computed = self._counts.tolist()
-        matrix = None if twists is None else self._matrix[:found].copy()
-        return self._found_rows[:found].tolist(), self._found_columns[:found], matrix, computed
+        if damper is None:
+            return self._found_rows[:found].tolist(), self._found_columns[:found], None, None, computed
+        return (
+            self._found_rows[:found].tolist(),
+            self._found_columns[:found],
+            self._matrix[:found].copy(),
+            self._bound[:found].copy(),
+            computed,
+        )
 
     def __del__(self):
         handle, self._handle = getattr(self, "_handle", None), None

@@ -122,7 +122,9 @@ class JointLimits:
 
     def __post_init__(self):
         # 1/J, 0 without a jerk bound: the jerk ramps' durations per unit of acceleration [s³/rad].
-        object.__setattr__(self, "_jerk_ramp", np.where(np.isfinite(self.jerk), 1.0 / self.jerk, 0.0))
+        # Plain floats, as the bounds beside them: a handful of products per joint cost less so.
+        ramps = np.where(np.isfinite(self.jerk), 1.0 / self.jerk, 0.0)
+        object.__setattr__(self, "_ramps", tuple(zip(self.acceleration.tolist(), ramps.tolist())))
 
     @classmethod
     def of(cls, model: RobotModel, per_joint: Mapping[str, JointLimit] | None = None) -> JointLimits:
@@ -167,7 +169,7 @@ class JointLimits:
         """
         worst = 0.0
         accelerations = acceleration if acceleration is not None else [0.0] * len(velocity)
-        for v, a, bound, ramp in zip(velocity, accelerations, self.acceleration, self._jerk_ramp):
+        for v, a, (bound, ramp) in zip(velocity, accelerations, self._ramps):
             if not math.isfinite(bound):
                 continue
             speed = abs(v) + 0.5 * a * a * ramp
@@ -184,14 +186,21 @@ class JointLimits:
         time-optimal stop's distance where it reaches ``-A``, and bound it where it does not (by
         the AM-GM inequality), so it is never below :func:`stopping_distance`.
         """
-        v, a = np.asarray(velocity, dtype=float), np.asarray(acceleration, dtype=float)
-        direction = np.where(v != 0.0, np.sign(v), np.sign(a))
-        rising = np.maximum(a * direction, 0.0)
-        bound, ramp = self.acceleration, self._jerk_ramp
-        with np.errstate(invalid="ignore"):  # inf * 0 where a joint has no acceleration bound
-            peak = np.abs(v) + 0.5 * rising * rising * ramp
-            travel = peak * (rising * ramp + peak / (2.0 * bound) + 0.5 * bound * ramp)
-        return np.where(np.isfinite(bound), direction * travel, 0.0)
+        travel = []
+        for v, a, (bound, ramp) in zip(_floats(velocity), _floats(acceleration), self._ramps):
+            if not math.isfinite(bound):
+                travel.append(0.0)
+                continue
+            direction = math.copysign(1.0, v) if v != 0.0 else (math.copysign(1.0, a) if a != 0.0 else 0.0)
+            rising = max(a * direction, 0.0)
+            peak = abs(v) + 0.5 * rising * rising * ramp
+            travel.append(direction * peak * (rising * ramp + peak / (2.0 * bound) + 0.5 * bound * ramp))
+        return np.array(travel)
+
+
+def _floats(values: Sequence[float]) -> list[float]:
+    """``values`` as plain floats (an array's ``tolist``)."""
+    return values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
 
 
 def stopping_distance(speed: float, acceleration: float, max_acceleration: float, max_jerk: float) -> float:

@@ -112,13 +112,16 @@ def test_native_and_python_narrow_phases_agree_with_coal(panda, fractions, obsta
     influence=st.sampled_from([0.05, 0.1, 0.3]),
     # Small steps stay within one band (the near rows only), large ones make full passes.
     scale=st.sampled_from([1.0, 0.02, 0.001]),
+    # A command's stopping travel per joint (the filter's braking), or none.
+    travel=st.one_of(st.none(), st.lists(st.floats(-0.1, 0.1), min_size=7, max_size=7)),
 )
 @settings(max_examples=25, deadline=None)
 def test_the_native_broad_phase_and_damper_rows_are_the_python_checkers_along_a_walk(
-    panda, start, steps, obstacles, influence, scale
+    panda, start, steps, obstacles, influence, scale, travel
 ):
-    """mk_narrow_near (broad phase, narrow phase, damper rows in C++) against the checker's
-    Python path, cycle after cycle: the same pairs computed, the same rows, the same numbers."""
+    """mk_narrow_near (placement, broad phase, narrow phase, damper rows and the braking's
+    lessening in C++) against the checker's Python path, cycle after cycle: the same pairs
+    computed, the same rows, the same numbers."""
     model, collision = panda
     scene, _ = _scene(panda, obstacles)
     native, python = CollisionChecker(model, collision), CollisionChecker(model, collision, native=False)
@@ -129,17 +132,23 @@ def test_the_native_broad_phase_and_damper_rows_are_the_python_checkers_along_a_
     for joint, move in steps:
         q = q.copy()
         q[joint] = np.clip(q[joint] + scale * move, model.lower[joint], model.upper[joint])
-        ours, reference = native.evaluate(q, influence, 0.02, 0.5), python.evaluate(q, influence, 0.02, 0.5)
+        travel_now = None if travel is None else np.array(travel) * (1.0 + joint)  # changes from cycle to cycle
+        ours = native.evaluate(q, influence, 0.02, 0.5, travel_now)
+        reference = python.evaluate(q, influence, 0.02, 0.5, travel_now)
         assert native.pairs_computed == python.pairs_computed
         assert ours.labels == reference.labels
         np.testing.assert_allclose(ours.distances, reference.distances, atol=1e-9)
         np.testing.assert_allclose(ours.matrix, reference.matrix, atol=1e-9)
         np.testing.assert_allclose(ours.bound, reference.bound, atol=1e-9)
+        assert (ours.nearest is None) == (reference.nearest is None)
         if reference.nearest is not None:
             assert ours.nearest.pair == reference.nearest.pair
             np.testing.assert_allclose(ours.nearest.point_first, reference.nearest.point_first, atol=1e-9)
         # pair_distances shares the bounds evaluate carries: mixing the two keeps them equal.
-        assert sorted(p.label for p in native.pair_distances(q, influence)) == sorted(ours.labels)
+        if travel is None:
+            assert sorted(p.label for p in native.pair_distances(q, influence)) == sorted(ours.labels)
+        else:
+            native.pair_distances(q, influence)
         python.pair_distances(q, influence)
 
 

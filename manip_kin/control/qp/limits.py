@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.collision.distances import BAND, CollisionChecker, DamperRows
+from manip_kin.collision.distances import CollisionChecker, DamperRows
 from manip_kin.control.command_filter import FilterState
 from manip_kin.control.joint_limits import JointLimits
 from manip_kin.core.model import RobotModel
@@ -191,19 +191,4 @@ class CollisionLimit:
         # A loop that runs late drives each of the stop's commands for longer: the filter's limits
         # hold per update, so the stop's travel stretches by as much.
         travel = command.stretch * self.braking.stopping_travel(command.velocity, command.acceleration)
-        reach = float(np.abs(travel) @ self.checker.reach_most)  # the most any pair closes meanwhile
-        # Whole bands: a cutoff that stays the same from cycle to cycle keeps the broad phase's
-        # near rows (a new cutoff is a full pass).
-        rows = self.checker.evaluate(q, d_i + BAND * math.ceil(reach / BAND), d_s, self.gain)
-        if not rows.labels:
-            return rows
-        left = rows.distances - np.maximum(rows.matrix @ travel, 0.0)
-        keep = left < d_i
-        nearest = rows.nearest if rows.nearest.distance < d_i else None  # reported within d_i only
-        return DamperRows(
-            tuple(label for label, kept in zip(rows.labels, keep.tolist()) if kept),
-            rows.distances[keep],
-            rows.matrix[keep],
-            self.gain * (left[keep] - d_s) / (d_i - d_s),
-            nearest,
-        )
+        return self.checker.evaluate(q, d_i, d_s, self.gain, travel)
