@@ -408,7 +408,7 @@ class CollisionChecker:
             return DamperRows((), np.zeros(0), np.zeros((0, self.model.dof)), np.zeros(0), None)
         distances = columns[:, 0].copy()
         labels = self._labels
-        nearest = int(np.argmin(distances))
+        nearest = int(distances.argmin())
         return DamperRows(
             tuple(labels[row] for row in rows),
             distances,

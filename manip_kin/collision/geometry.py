@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from manip_kin.collision.meshes import convex_vertices, load_convex_mesh
+from manip_kin.core.kinematics import compiled_frames
 from manip_kin.core.mesh_uris import require_mesh_file
 from manip_kin.core.model import RobotModel
 from manip_kin.core.rotations import angle_axis_to_matrix, invert_transform
@@ -246,8 +247,6 @@ def frame_values(model: RobotModel, q: np.ndarray) -> tuple[float, ...]:
     ``[ω; v]`` in base (6 x n, row-major), at ``q`` (n,), flat: the generated function's own
     output (see :func:`~manip_kin.codegen.chain.generate_frames_source`), which the native
     narrow phase takes as it is."""
-    from manip_kin.core.kinematics import compiled_frames
-
     return compiled_frames(model)(q.tolist())
 
 

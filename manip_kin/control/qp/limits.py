@@ -87,12 +87,15 @@ class PositionLimit:
         # A range narrower than twice the margin: aim for its middle.
         narrow = lower > upper
         middle = 0.5 * (np.asarray(self.lower, dtype=float) + np.asarray(self.upper, dtype=float))
-        object.__setattr__(self, "_upper_kept", np.where(narrow, middle, upper))
-        object.__setattr__(self, "_lower_kept", np.where(narrow, middle, lower))
+        # The kept limits as rows [lower, upper], shape (2, n): both bounds in one product.
+        kept = np.array([np.where(narrow, middle, lower), np.where(narrow, middle, upper)])
+        kept.setflags(write=False)
+        object.__setattr__(self, "_kept", kept)
 
     def box(self, q: np.ndarray, dt: float, previous: np.ndarray) -> Box:
         # inf - q stays inf: a joint without a limit gets no bound.
-        return Box(self.gain * (self._lower_kept - q), self.gain * (self._upper_kept - q))
+        lower, upper = self.gain * (self._kept - q)
+        return Box(lower, upper)
 
 
 @dataclass(frozen=True)
@@ -105,13 +108,20 @@ class VelocityLimit:
 
     limits: np.ndarray
 
+    def __post_init__(self):
+        limits = np.array(self.limits, dtype=float)
+        lower = -limits
+        for array in (limits, lower):
+            array.setflags(write=False)
+        object.__setattr__(self, "_box", Box(lower, limits))  # the same every cycle
+
     @classmethod
     def of(cls, model: RobotModel) -> VelocityLimit:
         """The model's velocity limits."""
         return cls(model.velocity_limits)
 
     def box(self, q: np.ndarray, dt: float, previous: np.ndarray) -> Box:
-        return Box(-self.limits, self.limits)
+        return self._box
 
 
 @dataclass(frozen=True)

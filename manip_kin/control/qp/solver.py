@@ -69,7 +69,7 @@ def solve_qp(
         return Solution(None, SolveStatus.FAILED)
     if flag in (1, 2):  # optimal, soft optimal
         x = np.asarray(x, dtype=float)
-        if np.all(np.isfinite(x)):
+        if np.isfinite(x).all():
             return Solution(x, SolveStatus.OPTIMAL)
         return Solution(None, SolveStatus.FAILED)
     if flag == -1:

@@ -46,12 +46,16 @@ class PoseTask:
     model: RobotModel
     config: ControllerConfig = ControllerConfig()
     law: CartesianController = field(init=False, repr=False, compare=False)
-    _row_index: list[int] = field(init=False, repr=False, compare=False)
+    _row_index: np.ndarray | None = field(init=False, repr=False, compare=False)
+    _chain: object = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         unlimited = replace(self.config, respect_position_limits=False, respect_velocity_limits=False)
         object.__setattr__(self, "law", CartesianController(self.model, unlimited))
-        object.__setattr__(self, "_row_index", list(self.law.task.rows))
+        rows = list(self.law.task.rows)
+        # All six rows: the Jacobian as it is (a fancy index would copy it).
+        object.__setattr__(self, "_row_index", None if rows == list(range(6)) else np.array(rows))
+        object.__setattr__(self, "_chain", compiled_kinematics(self.model, self.law.frame_index, True))
 
     @property
     def rows(self) -> tuple[int, ...]:
@@ -64,9 +68,8 @@ class PoseTask:
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """The task rows of the controlled frame's geometric Jacobian, shape (m, n)."""
-        n = self.model.dof
-        values = compiled_kinematics(self.model, self.law.frame_index, True)(q.tolist())
-        return jacobian_of(values, n)[self._row_index]
+        jacobian = jacobian_of(self._chain(q.tolist()), self.model.dof)
+        return jacobian if self._row_index is None else jacobian[self._row_index]
 
 
 @dataclass(frozen=True)
