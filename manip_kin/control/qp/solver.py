@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
+import daqp
 import numpy as np
 
 _NO_LOWER = -1e30  # daqp's "no bound"
@@ -51,8 +52,6 @@ def solve_qp(
         matrix: A, shape (k, n), or None.
         bound: b, shape (k,), or None.
     """
-    import daqp
-
     n = len(linear)
     rows = np.zeros((0, n)) if matrix is None else np.ascontiguousarray(matrix, dtype=float)
     upper_all = np.concatenate([np.minimum(upper, 1e30), [] if bound is None else bound])
