@@ -7,7 +7,8 @@ from typing import NamedTuple
 import numpy as np
 
 from manip_kin.collision.collision_model import CollisionModel
-from manip_kin.collision.distances import CollisionChecker, PairDistance
+from manip_kin.collision.distances import CollisionChecker
+from manip_kin.collision.pair_distance import PairDistance
 from manip_kin.core.model import RobotModel
 from manip_kin.core.scene import Scene
 

@@ -22,7 +22,7 @@ class Blocked:
     """The pair that blocks the goal.
 
     Attributes:
-        pair: the pair label, ``first-second`` (see :attr:`~manip_kin.collision.distances.PairDistance.label`).
+        pair: the pair label, ``first-second`` (see :attr:`~manip_kin.collision.pair_distance.PairDistance.label`).
         distance: the nearest distance in the newest output [m].
         position_progress: how much the position error shrank over the history [m] (nan for a
             joint reference).

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manip_kin.collision.distances import CollisionChecker, DamperRows
+from manip_kin.collision.distances import CollisionChecker
+from manip_kin.collision.pair_distance import DamperRows
 from manip_kin.control.command_filter import FilterState
 from manip_kin.control.joint_limits import JointLimits
 from manip_kin.core.model import RobotModel

@@ -412,7 +412,7 @@ def test_ctrl_c_stops_a_node_without_interrupting_the_callback_that_runs():
 
 
 def test_a_second_ctrl_c_interrupts_a_stuck_node_only_after_a_while():
-    from manip_kin.ros.runtime.runner import FORCE_INTERRUPT_AFTER_S
+    from manip_kin.ros.runtime.stop_signals import FORCE_INTERRUPT_AFTER_S
 
     with _python_process(CTRL_C_IN_A_CALLBACK, "stuck", ready="stuck") as process:
         process.send_signal(signal.SIGINT)
@@ -432,7 +432,7 @@ def test_cleanup_drops_the_keyboard_interrupt_of_the_signal_that_stopped_the_nod
     pending KeyboardInterrupt (a forced Ctrl-C; before run_node's own SIGINT handler, the SIGINT
     that ended spin(), seen in a loaded run: the node exited -2) can raise inside the call that
     turns SIGINT off. The cleanup drops it and turns the signal off."""
-    from manip_kin.ros.runtime import runner
+    from manip_kin.ros.runtime import stop_signals
 
     installed = []
     pending = {signal.SIGINT: True}
@@ -442,8 +442,8 @@ def test_cleanup_drops_the_keyboard_interrupt_of_the_signal_that_stopped_the_nod
             raise KeyboardInterrupt
         installed.append((number, handler))
 
-    monkeypatch.setattr(runner.signal, "signal", fake_signal)
-    runner._ignore_signals()
+    monkeypatch.setattr(stop_signals.signal, "signal", fake_signal)
+    stop_signals.ignore_signals()
     assert installed == [(signal.SIGINT, signal.SIG_IGN), (signal.SIGTERM, signal.SIG_IGN)]
 
 
