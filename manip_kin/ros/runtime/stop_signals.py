@@ -86,7 +86,8 @@ class SignalWakeup:
     the main thread between bytecodes: a main thread blocked in the executor's wait (C code)
     runs it only once something wakes that wait. ``signal.set_wakeup_fd`` has the C-level
     handler write a byte to a pipe; a thread blocked on the pipe wakes the executor. A no-op
-    timer every 20 ms did the same for 2.9 % of a core (the controller at 1 kHz, 2026-12-06).
+    timer every 20 ms (:data:`SIGNAL_POLL_PERIOD_S`, now the fallback) woke it 50 times a second
+    instead, each wake a pass of rclpy's Python executor (docs/collision.md measures it).
     """
 
     def __init__(self) -> None:
