@@ -130,7 +130,8 @@ def _target(recipe: NativeRecipe) -> tuple[str, Path]:
     except OSError as error:
         raise NativeUnavailable(f"{recipe.source}: {error.strerror}") from None
     digest = hashlib.sha256()
-    # Not the source's path: clones of one release share the build.
+    # Not the source's path: checkouts that build against the same coal (the flags hold its
+    # directories, which the library's run path points at) share the build.
     flags = (FLAGS, recipe.include_dirs, recipe.library_dirs, recipe.libraries)
     for part in (text, version.encode(), repr(flags).encode(), recipe.version.encode()):
         digest.update(part)
