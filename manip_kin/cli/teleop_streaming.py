@@ -31,6 +31,8 @@ STOP_SERVICE = "cartesian_controller/stop"
 DESCRIPTION_WAIT_S = 2.0
 STOP_SERVICE_WAIT_S = 0.5
 ZERO_ACK_WAIT_S = 1.0
+#: How long the zeros may hold back the stop service call [s] (see :meth:`CommandStream.stop`).
+ZERO_BEFORE_STOP_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -124,7 +126,6 @@ class CommandStream:
 
     def stop(self) -> str:
         """Zero what was streamed, then call the controller's stop service if it is there; what was done."""
-        from rclpy.duration import Duration
         from std_srvs.srv import Trigger
 
         done = []
@@ -134,6 +135,10 @@ class CommandStream:
             else:
                 self.jog(msg.name, [0.0] * len(msg.name))
             done.append(f"zero on {self.client.topic(topic)}")
+        # Topics and services are not ordered with each other: the zero, sent first, could reach
+        # the controller after its stop. Its acknowledgement first, for a few of the client's
+        # 20 ms heartbeats at most: the stop, which brings the arm to rest too, is not held back longer.
+        self._wait_for_zeros(time.monotonic() + ZERO_BEFORE_STOP_S)
         service = self.client.node.create_client(Trigger, STOP_SERVICE)
         name = self.client.node.resolve_service_name(STOP_SERVICE)
         try:
@@ -151,11 +156,16 @@ class CommandStream:
             self.client.node.destroy_client(service)
         # The zeros went out with publish(); a lost one is sent again while the process lives, so
         # it stays up to ZERO_ACK_WAIT_S for the acknowledgement (at the client's 20 ms heartbeat).
-        deadline = time.monotonic() + ZERO_ACK_WAIT_S
+        self._wait_for_zeros(time.monotonic() + ZERO_ACK_WAIT_S)
+        return "; ".join(done)
+
+    def _wait_for_zeros(self, deadline: float) -> None:
+        """Until every streamed topic's messages are acknowledged, or ``deadline`` [monotonic s]."""
+        from rclpy.duration import Duration
+
         for topic in self._last:
             publisher = self.client.publisher(self._types[topic], topic)
             publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
-        return "; ".join(done)
 
 
 def stream_for(client, send, duration: float, rate_hz: float) -> float:
