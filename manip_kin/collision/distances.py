@@ -47,8 +47,9 @@ from manip_kin.collision.geometry import (
     obstacle_shape,
     sphere_centres,
 )
-from manip_kin.collision.narrow_phase import ROW_WIDTH, NativeNarrowPhase, PythonNarrowPhase, make_narrow_phase
+from manip_kin.collision.narrow_phase import NativeNarrowPhase, make_narrow_phase
 from manip_kin.collision.pair_distance import DamperRows, PairDistance, obstacle_name
+from manip_kin.collision.python_narrow_phase import ROW_WIDTH, PythonNarrowPhase
 from manip_kin.core.model import RobotModel
 from manip_kin.core.scene import Scene
 from manip_kin.errors import ModelFileError

@@ -18,7 +18,8 @@ from hypothesis import strategies as st
 
 from manip_kin.collision.distances import CollisionChecker
 from manip_kin.collision.geometry import obstacle_shape
-from manip_kin.collision.narrow_phase import NativeNarrowPhase, PythonNarrowPhase, native_problem
+from manip_kin.collision.narrow_phase import NativeNarrowPhase, native_problem
+from manip_kin.collision.python_narrow_phase import PythonNarrowPhase
 from manip_kin.core.kinematics import frame_poses
 from manip_kin.core.rotations import angle_axis_to_matrix, make_transform
 from manip_kin.core.scene import Scene, make_obstacle
